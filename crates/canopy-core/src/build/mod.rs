@@ -1,0 +1,187 @@
+//! Builders. [`BuildOptions`] picks one; each lives in its own file:
+//! `binned_sah.rs` (Wald 2007, parallel top levels) and `lbvh.rs` (Karras 2012, data-parallel),
+//! with the radix sort the LBVH needs in `radix_sort.rs`. Every builder checks its input here
+//! first and writes the same depth-first [`Bvh`] layout.
+
+mod binned_sah;
+mod lbvh;
+mod radix_sort;
+
+pub use radix_sort::radix_sort_pairs;
+
+use crate::aabb::Aabb;
+use crate::bvh::{Bvh, Node, PrimBounds};
+use crate::error::BvhError;
+
+/// Which builder [`Bvh::build`] runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Builder {
+    /// Top-down binned surface-area heuristic (Wald 2007): the best trees for queries; the
+    /// default.
+    #[default]
+    BinnedSah,
+    /// Linear BVH over 63-bit Morton codes (Karras 2012): the fastest build, trees of lower
+    /// quality. Good for trees rebuilt every step.
+    Lbvh,
+}
+
+/// Options of [`Bvh::build`]. The defaults suit both broadphase and ray-casting use.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BuildOptions {
+    /// Which builder to run. Default: [`Builder::BinnedSah`].
+    pub builder: Builder,
+    /// Most primitives in one leaf (at least 1). Default: 4, a balance between tree depth and
+    /// leaf work that measured best for pair finding.
+    pub max_leaf_size: u32,
+    /// Number of SAH bins per axis, `2..=32` (SAH builder only). Default: 16, where Wald found
+    /// quality to level off.
+    pub bins: u32,
+    /// Use rayon for the top levels of the build (the current rayon pool). The tree is the same
+    /// either way. Default: `true`.
+    pub parallel: bool,
+    /// SAH cost of visiting a node, relative to `intersection_cost`. Default: 1.
+    pub traversal_cost: f32,
+    /// SAH cost of testing one primitive. Default: 1.
+    pub intersection_cost: f32,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        Self {
+            builder: Builder::BinnedSah,
+            max_leaf_size: 4,
+            bins: 16,
+            parallel: true,
+            traversal_cost: 1.0,
+            intersection_cost: 1.0,
+        }
+    }
+}
+
+impl BuildOptions {
+    /// These options with `builder` set.
+    pub fn with_builder(mut self, builder: Builder) -> Self {
+        self.builder = builder;
+        self
+    }
+
+    /// These options with `parallel` set.
+    pub fn with_parallel(mut self, parallel: bool) -> Self {
+        self.parallel = parallel;
+        self
+    }
+
+    /// These options with `max_leaf_size` set.
+    pub fn with_max_leaf_size(mut self, max_leaf_size: u32) -> Self {
+        self.max_leaf_size = max_leaf_size;
+        self
+    }
+
+    pub(crate) fn check(&self) -> Result<(), BvhError> {
+        if self.max_leaf_size == 0 {
+            return Err(BvhError::InvalidOptions("max_leaf_size must be at least 1"));
+        }
+        if !(2..=32).contains(&self.bins) {
+            return Err(BvhError::InvalidOptions("bins must be in 2..=32"));
+        }
+        let ok = |c: f32| c.is_finite() && c > 0.0;
+        if !ok(self.traversal_cost) || !ok(self.intersection_cost) {
+            return Err(BvhError::InvalidOptions(
+                "SAH costs must be finite and positive",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Index of the first invalid box, if any.
+pub(crate) fn first_invalid(aabbs: &[Aabb]) -> Option<usize> {
+    aabbs.iter().position(|a| !a.is_valid())
+}
+
+pub(crate) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, BvhError> {
+    options.check()?;
+    if aabbs.len() >= u32::MAX as usize {
+        return Err(BvhError::TooManyPrimitives { count: aabbs.len() });
+    }
+    if let Some(index) = first_invalid(aabbs) {
+        return Err(BvhError::InvalidAabb { index });
+    }
+    if aabbs.is_empty() {
+        return Ok(Bvh::default());
+    }
+    Ok(match options.builder {
+        Builder::BinnedSah => binned_sah::build(aabbs, options),
+        Builder::Lbvh => lbvh::build(aabbs, options),
+    })
+}
+
+/// Running min/max bounds on raw arrays, used by the builders.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Bounds {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+impl Bounds {
+    pub const EMPTY: Bounds = Bounds {
+        min: [f32::INFINITY; 3],
+        max: [f32::NEG_INFINITY; 3],
+    };
+
+    #[inline(always)]
+    pub fn grow(&mut self, min: &[f32; 3], max: &[f32; 3]) {
+        for i in 0..3 {
+            if min[i] < self.min[i] {
+                self.min[i] = min[i];
+            }
+            if max[i] > self.max[i] {
+                self.max[i] = max[i];
+            }
+        }
+    }
+
+    #[inline(always)]
+    pub fn grow_point(&mut self, p: &[f32; 3]) {
+        self.grow(p, p);
+    }
+
+    #[inline(always)]
+    pub fn merged(mut self, other: &Bounds) -> Bounds {
+        self.grow(&other.min, &other.max);
+        self
+    }
+
+    #[inline]
+    pub fn of_prims(prims: &[PrimBounds]) -> Bounds {
+        let mut b = Bounds::EMPTY;
+        for p in prims {
+            b.grow(&p.min, &p.max);
+        }
+        b
+    }
+}
+
+/// Centroid of raw bounds, computed without overflow near `f32::MAX`.
+#[inline(always)]
+pub(crate) fn centroid(min: &[f32; 3], max: &[f32; 3]) -> [f32; 3] {
+    [
+        min[0] * 0.5 + max[0] * 0.5,
+        min[1] * 0.5 + max[1] * 0.5,
+        min[2] * 0.5 + max[2] * 0.5,
+    ]
+}
+
+/// Appends `right` (a subtree built on its own, node indices relative to its start) after
+/// `out`, fixing the right-child indices, and returns where it starts. Parallel builders use
+/// this to join a subtree built on another thread.
+pub(crate) fn append_subtree(out: &mut Vec<Node>, mut right: Vec<Node>) -> u32 {
+    let base = out.len() as u32;
+    for n in right.iter_mut() {
+        if !n.is_leaf() {
+            n.first += base;
+        }
+    }
+    out.append(&mut right);
+    base
+}

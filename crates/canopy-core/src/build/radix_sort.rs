@@ -1,0 +1,168 @@
+//! Stable LSD radix sort of `(u64 key, u32 value)` pairs, 11-bit digits, with rayon-parallel
+//! histogram and scatter for large inputs. The LBVH builder sorts Morton codes with it. A stable
+//! sort has one answer, so the output does not depend on the thread count.
+
+use rayon::prelude::*;
+
+const DIGIT_BITS: u32 = 11;
+const BUCKETS: usize = 1 << DIGIT_BITS;
+const PASSES: u32 = 64_u32.div_ceil(DIGIT_BITS);
+/// Inputs at least this long sort in parallel (when asked to).
+const PARALLEL_THRESHOLD: usize = 1 << 16;
+
+#[inline(always)]
+fn digit(key: u64, pass: u32) -> usize {
+    ((key >> (pass * DIGIT_BITS)) as usize) & (BUCKETS - 1)
+}
+
+/// Sorts `keys` ascending, applying the same permutation to `values`; equal keys keep their
+/// order. `parallel` uses the current rayon pool for large inputs.
+///
+/// # Panics
+/// When `keys` and `values` differ in length (an internal precondition).
+///
+/// ```
+/// let mut keys = vec![5u64, 1, 5, 0];
+/// let mut vals = vec![0u32, 1, 2, 3];
+/// canopy_core::build::radix_sort_pairs(&mut keys, &mut vals, false);
+/// assert_eq!(keys, [0, 1, 5, 5]);
+/// assert_eq!(vals, [3, 1, 0, 2]);
+/// ```
+pub fn radix_sort_pairs(keys: &mut Vec<u64>, values: &mut Vec<u32>, parallel: bool) {
+    assert_eq!(keys.len(), values.len());
+    let n = keys.len();
+    if n < 2 {
+        return;
+    }
+    // Digits every key shares need no pass.
+    let or = keys.iter().fold(0u64, |a, &k| a | k);
+    let and = keys.iter().fold(u64::MAX, |a, &k| a & k);
+    let varying = or ^ and;
+
+    let mut tmp_keys = vec![0u64; n];
+    let mut tmp_vals = vec![0u32; n];
+    for pass in 0..PASSES {
+        if digit(varying, pass) == 0 {
+            continue;
+        }
+        if parallel && n >= PARALLEL_THRESHOLD {
+            scatter_parallel(keys, values, &mut tmp_keys, &mut tmp_vals, pass);
+        } else {
+            scatter_serial(keys, values, &mut tmp_keys, &mut tmp_vals, pass);
+        }
+        std::mem::swap(keys, &mut tmp_keys);
+        std::mem::swap(values, &mut tmp_vals);
+    }
+}
+
+fn scatter_serial(keys: &[u64], vals: &[u32], dk: &mut [u64], dv: &mut [u32], pass: u32) {
+    let mut offsets = vec![0usize; BUCKETS];
+    for &k in keys {
+        offsets[digit(k, pass)] += 1;
+    }
+    let mut sum = 0;
+    for o in offsets.iter_mut() {
+        let c = *o;
+        *o = sum;
+        sum += c;
+    }
+    for (&k, &v) in keys.iter().zip(vals) {
+        let d = digit(k, pass);
+        let o = offsets[d];
+        dk[o] = k;
+        dv[o] = v;
+        offsets[d] = o + 1;
+    }
+}
+
+/// Destination pointers shared by the scatter tasks; each writes a disjoint set of slots.
+#[derive(Clone, Copy)]
+struct Dest {
+    keys: *mut u64,
+    vals: *mut u32,
+}
+// SAFETY: tasks write disjoint indices (their own bucket ranges), see `scatter_parallel`.
+unsafe impl Send for Dest {}
+unsafe impl Sync for Dest {}
+
+fn scatter_parallel(keys: &[u64], vals: &[u32], dk: &mut [u64], dv: &mut [u32], pass: u32) {
+    let n = keys.len();
+    let chunks = (rayon::current_num_threads() * 4).clamp(1, n.div_ceil(4096));
+    let chunk_len = n.div_ceil(chunks);
+    // Per-chunk histograms, then exclusive offsets in (bucket, chunk) order: chunk c writes
+    // bucket b starting after every earlier bucket and after bucket b of chunks before c.
+    let mut hist: Vec<Vec<usize>> = keys
+        .par_chunks(chunk_len)
+        .map(|c| {
+            let mut h = vec![0usize; BUCKETS];
+            for &k in c {
+                h[digit(k, pass)] += 1;
+            }
+            h
+        })
+        .collect();
+    let mut sum = 0;
+    for b in 0..BUCKETS {
+        for h in hist.iter_mut() {
+            let c = h[b];
+            h[b] = sum;
+            sum += c;
+        }
+    }
+    debug_assert_eq!(sum, n);
+    let dest = Dest {
+        keys: dk.as_mut_ptr(),
+        vals: dv.as_mut_ptr(),
+    };
+    keys.par_chunks(chunk_len)
+        .zip(vals.par_chunks(chunk_len))
+        .zip(hist.par_iter_mut())
+        .for_each(|((ck, cv), offsets)| {
+            let dest = dest;
+            for (&k, &v) in ck.iter().zip(cv) {
+                let d = digit(k, pass);
+                let o = offsets[d];
+                // SAFETY: `o < n` and no other chunk owns slot `o` (offsets above are a
+                // partition of 0..n); the destination slices outlive this scope.
+                unsafe {
+                    *dest.keys.add(o) = k;
+                    *dest.vals.add(o) = v;
+                }
+                offsets[d] = o + 1;
+            }
+        });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check(keys: Vec<u64>, parallel: bool) {
+        let mut k = keys.clone();
+        let mut v: Vec<u32> = (0..keys.len() as u32).collect();
+        radix_sort_pairs(&mut k, &mut v, parallel);
+        let mut expect: Vec<(u64, u32)> = keys.iter().copied().zip(0..).collect();
+        expect.sort(); // (key, original index): the stable order
+        assert_eq!(k, expect.iter().map(|e| e.0).collect::<Vec<_>>());
+        assert_eq!(v, expect.iter().map(|e| e.1).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn sorts_like_std_stable_sort() {
+        let mut s = 7u64;
+        let mut rnd = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        for &n in &[0usize, 1, 2, 17, 1000, 100_000] {
+            let keys: Vec<u64> = (0..n).map(|_| rnd() >> 1).collect();
+            check(keys.clone(), false);
+            check(keys, true);
+            let few: Vec<u64> = (0..n).map(|_| rnd() % 5).collect();
+            check(few.clone(), true);
+            check(few, false);
+        }
+    }
+}

@@ -1,0 +1,36 @@
+//! Error types returned by builders, refit and validation.
+
+use thiserror::Error;
+
+/// Why a tree could not be built or refit.
+#[derive(Clone, Debug, PartialEq, Error)]
+pub enum BvhError {
+    /// The box at `index` has a NaN or infinite coordinate, or `min > max` on some axis.
+    #[error("invalid AABB at index {index}: coordinates must be finite with min <= max")]
+    InvalidAabb {
+        /// Position of the offending box in the input slice.
+        index: usize,
+    },
+    /// More primitives than `u32` indices can address.
+    #[error("too many primitives: {count} (at most {} are supported)", u32::MAX - 1)]
+    TooManyPrimitives {
+        /// Number of boxes given.
+        count: usize,
+    },
+    /// Refit was given a different number of boxes than the tree was built with.
+    #[error("refit expects {expected} boxes, got {got}")]
+    LengthMismatch {
+        /// Primitive count of the tree.
+        expected: usize,
+        /// Number of boxes given.
+        got: usize,
+    },
+    /// A build option is out of range.
+    #[error("invalid build options: {0}")]
+    InvalidOptions(&'static str),
+}
+
+/// A broken tree invariant found by [`crate::Bvh::validate`].
+#[derive(Clone, Debug, PartialEq, Eq, Error)]
+#[error("invalid BVH: {0}")]
+pub struct ValidationError(pub String);

@@ -1,0 +1,85 @@
+//! Rays with a precomputed inverse direction, and the slab test against boxes used by the ray
+//! queries in `query/ray.rs`.
+
+use crate::aabb::Aabb;
+use nalgebra::{Point3, Vector3};
+
+/// A ray `origin + t * dir`, `t >= 0`, with its inverse direction precomputed for slab tests.
+///
+/// `dir` need not be normalised: times of impact are in units of `dir`. A zero component gives
+/// an infinite inverse, which the slab test handles (a ray lying exactly in a box's face plane
+/// may be reported as missing that box; every other ray is exact up to rounding).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    /// Start point.
+    pub origin: Point3<f32>,
+    /// Direction.
+    pub dir: Vector3<f32>,
+    /// Component-wise `1 / dir`.
+    pub inv_dir: Vector3<f32>,
+}
+
+impl Ray {
+    /// A ray from `origin` along `dir`.
+    #[inline]
+    pub fn new(origin: Point3<f32>, dir: Vector3<f32>) -> Self {
+        Self {
+            origin,
+            dir,
+            inv_dir: Vector3::new(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z),
+        }
+    }
+
+    /// The point at time `t`.
+    #[inline]
+    pub fn point_at(&self, t: f32) -> Point3<f32> {
+        self.origin + self.dir * t
+    }
+
+    /// `true` when origin and direction are finite and the direction is not zero.
+    pub fn is_valid(&self) -> bool {
+        self.origin.coords.iter().all(|c| c.is_finite())
+            && self.dir.iter().all(|c| c.is_finite())
+            && self.dir != Vector3::zeros()
+    }
+
+    /// Entry time of the ray into `aabb` within `[0, t_max]`, or `None` when it misses.
+    /// A ray starting inside the box enters at `t = 0`.
+    #[inline]
+    pub fn intersect_aabb(&self, aabb: &Aabb, t_max: f32) -> Option<f32> {
+        self.slab(&aabb.min_array(), &aabb.max_array(), t_max)
+    }
+
+    /// Slab test on raw bounds: entry time in `[0, t_max]`, or `None`.
+    #[inline(always)]
+    pub(crate) fn slab(&self, min: &[f32; 3], max: &[f32; 3], t_max: f32) -> Option<f32> {
+        let mut t0 = 0.0f32;
+        let mut t1 = t_max;
+        for i in 0..3 {
+            let a = (min[i] - self.origin[i]) * self.inv_dir[i];
+            let b = (max[i] - self.origin[i]) * self.inv_dir[i];
+            // `f32::min`/`max` drop a NaN operand (0 * inf when the origin lies on a face
+            // plane of an axis the ray is parallel to), which keeps the test conservative.
+            t0 = t0.max(a.min(b));
+            t1 = t1.min(a.max(b));
+        }
+        (t0 <= t1).then_some(t0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slab_hits_and_misses() {
+        let b = Aabb::from_arrays([1.0, -1.0, -1.0], [2.0, 1.0, 1.0]);
+        let r = Ray::new(Point3::origin(), Vector3::x());
+        assert_eq!(r.intersect_aabb(&b, 10.0), Some(1.0));
+        assert_eq!(r.intersect_aabb(&b, 0.5), None);
+        let r = Ray::new(Point3::origin(), -Vector3::x());
+        assert_eq!(r.intersect_aabb(&b, 10.0), None);
+        let inside = Ray::new(Point3::new(1.5, 0.0, 0.0), Vector3::y());
+        assert_eq!(inside.intersect_aabb(&b, 10.0), Some(0.0));
+    }
+}

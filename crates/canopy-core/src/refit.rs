@@ -1,0 +1,69 @@
+//! Refit: new primitive boxes, same topology, in one reverse pass over the depth-first array
+//! (children always follow their parent, so walking backwards visits children first).
+
+use crate::aabb::Aabb;
+use crate::build::{first_invalid, Bounds};
+use crate::bvh::{Bvh, PrimBounds};
+use crate::error::BvhError;
+
+impl Bvh {
+    /// Replaces every primitive's box (`aabbs[i]` for primitive `i`) and refits all nodes.
+    ///
+    /// The topology is kept, so query cost grows as boxes drift from where the tree was built;
+    /// rebuild when [`crate::BvhStats::sah_cost`] has grown too much.
+    ///
+    /// # Errors
+    /// [`BvhError::LengthMismatch`] unless `aabbs.len() == self.len()`, and
+    /// [`BvhError::InvalidAabb`] for a NaN, infinite or inverted box. On error the tree is
+    /// unchanged.
+    ///
+    /// # Example
+    /// ```
+    /// use canopy_core::{Aabb, Bvh, BuildOptions};
+    /// let mut boxes = vec![Aabb::from_arrays([0.0; 3], [1.0; 3]); 10];
+    /// let mut bvh = Bvh::build(&boxes, BuildOptions::default())?;
+    /// boxes[3] = Aabb::from_arrays([5.0; 3], [6.0; 3]);
+    /// bvh.refit(&boxes)?;
+    /// assert_eq!(bvh.root_aabb().unwrap().max.x, 6.0);
+    /// assert!(bvh.validate_with_primitives(&boxes).is_ok());
+    /// # Ok::<(), canopy_core::BvhError>(())
+    /// ```
+    pub fn refit(&mut self, aabbs: &[Aabb]) -> Result<(), BvhError> {
+        if aabbs.len() != self.len() {
+            return Err(BvhError::LengthMismatch {
+                expected: self.len(),
+                got: aabbs.len(),
+            });
+        }
+        if let Some(index) = first_invalid(aabbs) {
+            return Err(BvhError::InvalidAabb { index });
+        }
+        for (slot, &prim) in self.prim_bounds.iter_mut().zip(&self.prim_indices) {
+            *slot = PrimBounds::from_aabb(&aabbs[prim as usize]);
+        }
+        self.refit_nodes();
+        Ok(())
+    }
+
+    /// Recomputes every node box from the stored primitive boxes.
+    pub(crate) fn refit_nodes(&mut self) {
+        for i in (0..self.nodes.len()).rev() {
+            let node = self.nodes[i];
+            let b = if node.is_leaf() {
+                Bounds::of_prims(&self.prim_bounds[node.leaf_range()])
+            } else {
+                let (l, r) = (&self.nodes[i + 1], &self.nodes[node.right() as usize]);
+                Bounds {
+                    min: l.min,
+                    max: l.max,
+                }
+                .merged(&Bounds {
+                    min: r.min,
+                    max: r.max,
+                })
+            };
+            self.nodes[i].min = b.min;
+            self.nodes[i].max = b.max;
+        }
+    }
+}

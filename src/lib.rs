@@ -1,0 +1,17 @@
+//! # canopy
+//!
+//! A fast bounding volume hierarchy and, built on it, a broadphase for the Rapier physics
+//! engine. This root crate re-exports the workspace crates:
+//!
+//! * [`core`] (`canopy-core`): the BVH: builders, refit, queries, pair finding.
+//!
+//! ```
+//! use canopy::core::{Aabb, Bvh, BuildOptions};
+//! let bvh = Bvh::build(&[Aabb::from_arrays([0.0; 3], [1.0; 3])], BuildOptions::default())?;
+//! assert_eq!(bvh.len(), 1);
+//! # Ok::<(), canopy::core::BvhError>(())
+//! ```
+
+#![deny(missing_docs)]
+
+pub use canopy_core as core;
