@@ -1,0 +1,430 @@
+//! Property tests: both builders and every query against brute force over all primitives, on
+//! random inputs drawn from several distributions (uniform, clustered, identical, zero-size,
+//! far from the origin), including empty and single-box inputs. Every tree is validated.
+
+use canopy_core::{Aabb, BuildOptions, Builder, Bvh, BvhError, Ray};
+use nalgebra::{Point3, Vector3};
+use proptest::prelude::*;
+
+const FAR: f32 = 1.0e6;
+
+fn uniform_box(lo: f32, hi: f32, max_half: f32) -> impl Strategy<Value = Aabb> {
+    (
+        prop::array::uniform3(lo..hi),
+        prop::array::uniform3(0.0f32..max_half),
+    )
+        .prop_map(|(c, h)| Aabb::from_center_half_extents(Point3::from(c), Vector3::from(h)))
+}
+
+/// Box sets from every distribution the issue names.
+fn box_set(max_len: usize) -> impl Strategy<Value = Vec<Aabb>> {
+    prop_oneof![
+        // uniform
+        prop::collection::vec(uniform_box(-50.0, 50.0, 6.0), 0..max_len),
+        // clustered: a few tight clusters
+        (
+            prop::collection::vec(prop::array::uniform3(-100.0f32..100.0), 1..4),
+            prop::collection::vec(
+                (
+                    0usize..4,
+                    prop::array::uniform3(-1.0f32..1.0),
+                    prop::array::uniform3(0.0f32..0.5)
+                ),
+                0..max_len
+            ),
+        )
+            .prop_map(|(centres, items)| {
+                items
+                    .into_iter()
+                    .map(|(k, o, h)| {
+                        let c = centres[k % centres.len()];
+                        let c = Point3::new(c[0] + o[0], c[1] + o[1], c[2] + o[2]);
+                        Aabb::from_center_half_extents(c, Vector3::from(h))
+                    })
+                    .collect()
+            }),
+        // all identical
+        (uniform_box(-10.0, 10.0, 2.0), 0..max_len).prop_map(|(b, n)| vec![b; n]),
+        // zero-size boxes (points), some repeated
+        prop::collection::vec(prop::array::uniform3(-5.0f32..5.0), 0..max_len).prop_map(|ps| {
+            ps.into_iter()
+                .map(|p| Aabb::from_point(Point3::from(p.map(|c| c.round()))))
+                .collect()
+        }),
+        // far from the origin
+        prop::collection::vec(uniform_box(FAR - 100.0, FAR + 100.0, 8.0), 0..max_len),
+    ]
+}
+
+fn options() -> impl Strategy<Value = BuildOptions> {
+    (prop::bool::ANY, 1u32..9, 2u32..33, prop::bool::ANY).prop_map(|(lbvh, leaf, bins, par)| {
+        BuildOptions {
+            builder: if lbvh {
+                Builder::Lbvh
+            } else {
+                Builder::BinnedSah
+            },
+            max_leaf_size: leaf,
+            bins,
+            parallel: par,
+            ..Default::default()
+        }
+    })
+}
+
+fn build_checked(boxes: &[Aabb], opts: BuildOptions) -> Bvh {
+    let bvh = Bvh::build(boxes, opts).expect("valid input builds");
+    bvh.validate_with_primitives(boxes)
+        .expect("built tree is valid");
+    assert_eq!(bvh.len(), boxes.len());
+    assert!(bvh.stats().max_leaf_size <= opts.max_leaf_size as usize);
+    bvh
+}
+
+fn brute_self_pairs(boxes: &[Aabb]) -> Vec<(u32, u32)> {
+    let mut v = Vec::new();
+    for i in 0..boxes.len() {
+        for j in i + 1..boxes.len() {
+            if boxes[i].intersects(&boxes[j]) {
+                v.push((i as u32, j as u32));
+            }
+        }
+    }
+    v
+}
+
+fn sorted(mut v: Vec<(u32, u32)>) -> Vec<(u32, u32)> {
+    v.sort_unstable();
+    v
+}
+
+/// A query box or point near the data, so queries actually hit something.
+fn query_near(boxes: &[Aabb], pick: usize, offset: [f32; 3], half: [f32; 3]) -> Aabb {
+    let c = boxes
+        .get(pick % boxes.len().max(1))
+        .map(|b| b.center())
+        .unwrap_or_else(Point3::origin);
+    Aabb::from_center_half_extents(c + Vector3::from(offset), Vector3::from(half))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+
+    #[test]
+    fn self_pairs_match_brute_force(boxes in box_set(200), opts in options()) {
+        let bvh = build_checked(&boxes, opts);
+        let expect = brute_self_pairs(&boxes);
+        let mut serial = Vec::new();
+        bvh.self_pairs(|a, b| serial.push((a, b)));
+        prop_assert!(serial.iter().all(|&(a, b)| a < b));
+        let serial = sorted(serial);
+        prop_assert_eq!(&serial, &expect, "serial self pairs");
+        prop_assert_eq!(sorted(bvh.par_self_pairs()), expect, "parallel self pairs");
+    }
+
+    #[test]
+    fn tree_pairs_match_brute_force(a in box_set(150), b in box_set(150), oa in options(), ob in options()) {
+        let (ta, tb) = (build_checked(&a, oa), build_checked(&b, ob));
+        let mut expect = Vec::new();
+        for (i, x) in a.iter().enumerate() {
+            for (j, y) in b.iter().enumerate() {
+                if x.intersects(y) {
+                    expect.push((i as u32, j as u32));
+                }
+            }
+        }
+        let mut got = Vec::new();
+        ta.pairs_with(&tb, |i, j| got.push((i, j)));
+        prop_assert_eq!(sorted(got), expect.clone());
+        prop_assert_eq!(sorted(ta.par_pairs_with(&tb)), expect);
+    }
+
+    #[test]
+    fn overlap_and_point_queries_match_brute_force(
+        boxes in box_set(200),
+        opts in options(),
+        pick in 0usize..1000,
+        offset in prop::array::uniform3(-3.0f32..3.0),
+        half in prop::array::uniform3(0.0f32..4.0),
+    ) {
+        let bvh = build_checked(&boxes, opts);
+        let q = query_near(&boxes, pick, offset, half);
+        let mut got: Vec<u32> = bvh.overlaps(&q).collect();
+        got.sort_unstable();
+        let expect: Vec<u32> = (0..boxes.len() as u32).filter(|&i| boxes[i as usize].intersects(&q)).collect();
+        prop_assert_eq!(&got, &expect);
+        let mut cb = Vec::new();
+        bvh.for_each_overlap(&q, |i| cb.push(i));
+        cb.sort_unstable();
+        prop_assert_eq!(cb, expect);
+
+        let p = q.center();
+        let mut got: Vec<u32> = bvh.containing_point(&p).collect();
+        got.sort_unstable();
+        let expect: Vec<u32> = (0..boxes.len() as u32).filter(|&i| boxes[i as usize].contains_point(&p)).collect();
+        prop_assert_eq!(got, expect);
+    }
+
+    #[test]
+    fn ray_casts_match_brute_force(
+        boxes in box_set(200),
+        opts in options(),
+        pick in 0usize..1000,
+        offset in prop::array::uniform3(-30.0f32..30.0),
+        dir in prop::array::uniform3(-1.0f32..1.0),
+        axis_aligned in 0usize..4,
+        t_max in prop_oneof![Just(f32::INFINITY), 0.0f32..100.0],
+    ) {
+        let bvh = build_checked(&boxes, opts);
+        let origin = query_near(&boxes, pick, offset, [0.0; 3]).min;
+        let mut d = Vector3::from(dir);
+        if axis_aligned < 3 {
+            // Rays parallel to two axes exercise the infinite inverse direction.
+            d = Vector3::zeros();
+            d[axis_aligned] = if dir[0] < 0.0 { -1.0 } else { 1.0 };
+        }
+        prop_assume!(d.norm() > 1e-3);
+        // Aim at a box half the time.
+        let ray = Ray::new(origin, d);
+        let test = |i: u32, t: f32| ray.intersect_aabb(&boxes[i as usize], t);
+        let brute = (0..boxes.len() as u32)
+            .filter_map(|i| test(i, t_max).map(|t| (t, i)))
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        let got = bvh.cast_ray(&ray, t_max, test);
+        match (got, brute) {
+            (None, None) => {}
+            (Some(h), Some((t, _))) => {
+                prop_assert_eq!(h.t, t);
+                prop_assert_eq!(test(h.primitive, t_max), Some(t), "reported primitive is hit at t");
+            }
+            (g, b) => prop_assert!(false, "tree {:?} vs brute force {:?}", g, b),
+        }
+        let any = bvh.cast_ray_any(&ray, t_max, test);
+        prop_assert_eq!(any.is_some(), brute.is_some());
+        if let Some(h) = any {
+            prop_assert_eq!(test(h.primitive, t_max), Some(h.t));
+        }
+    }
+
+    #[test]
+    fn nearest_matches_brute_force(
+        boxes in box_set(200),
+        opts in options(),
+        pick in 0usize..1000,
+        offset in prop::array::uniform3(-20.0f32..20.0),
+        max_d in prop_oneof![Just(f32::INFINITY), 0.0f32..10.0],
+    ) {
+        let bvh = build_checked(&boxes, opts);
+        let p = query_near(&boxes, pick, offset, [0.0; 3]).min;
+        let dist = |i: u32, _best: f32| Some(boxes[i as usize].distance_to_point(&p));
+        let brute = (0..boxes.len() as u32)
+            .map(|i| (boxes[i as usize].distance_to_point(&p), i))
+            .filter(|&(d, _)| d <= max_d)
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        let got = bvh.nearest(&p, max_d, dist);
+        match (got, brute) {
+            (None, None) => {}
+            (Some(h), Some((d, _))) => {
+                prop_assert_eq!(h.distance, d);
+                prop_assert_eq!(boxes[h.primitive as usize].distance_to_point(&p), d);
+            }
+            (g, b) => prop_assert!(false, "tree {:?} vs brute force {:?}", g, b),
+        }
+    }
+
+    #[test]
+    fn refit_keeps_queries_exact(
+        boxes in box_set(150),
+        opts in options(),
+        moves in prop::collection::vec((prop::array::uniform3(-20.0f32..20.0), prop::array::uniform3(0.0f32..3.0)), 150),
+    ) {
+        let mut bvh = build_checked(&boxes, opts);
+        let moved: Vec<Aabb> = boxes
+            .iter()
+            .zip(moves.iter().cycle())
+            .map(|(b, (o, h))| Aabb::from_center_half_extents(b.center() + Vector3::from(*o), Vector3::from(*h)))
+            .collect();
+        bvh.refit(&moved).expect("valid boxes refit");
+        bvh.validate_with_primitives(&moved).expect("refit tree is valid");
+        let mut got = Vec::new();
+        bvh.self_pairs(|a, b| got.push((a, b)));
+        prop_assert_eq!(sorted(got), brute_self_pairs(&moved));
+    }
+
+    #[test]
+    fn invalid_boxes_are_errors_naming_the_first(
+        boxes in prop::collection::vec(uniform_box(-10.0, 10.0, 2.0), 1..100),
+        at in 0usize..100,
+        kind in 0usize..5,
+        lbvh in prop::bool::ANY,
+    ) {
+        let at = at % boxes.len();
+        let mut bad = boxes.clone();
+        let b = &mut bad[at];
+        match kind {
+            0 => b.min.x = f32::NAN,
+            1 => b.max.y = f32::NAN,
+            2 => b.max.z = f32::INFINITY,
+            3 => b.min.x = f32::NEG_INFINITY,
+            _ => b.min.y = b.max.y + 1.0, // inverted
+        }
+        let opts = BuildOptions::default().with_builder(if lbvh { Builder::Lbvh } else { Builder::BinnedSah });
+        prop_assert_eq!(Bvh::build(&bad, opts).err(), Some(BvhError::InvalidAabb { index: at }));
+
+        // Refit with a bad box fails and leaves the tree as it was.
+        let mut bvh = build_checked(&boxes, opts);
+        let before = bvh.clone();
+        prop_assert_eq!(bvh.refit(&bad).err(), Some(BvhError::InvalidAabb { index: at }));
+        prop_assert_eq!(bvh.nodes(), before.nodes());
+        prop_assert_eq!(bvh.primitive_bounds(), before.primitive_bounds());
+    }
+}
+
+#[test]
+fn empty_input_is_an_empty_tree() {
+    for builder in [Builder::BinnedSah, Builder::Lbvh] {
+        let bvh = Bvh::build(&[], BuildOptions::default().with_builder(builder)).unwrap();
+        bvh.validate().unwrap();
+        assert!(bvh.is_empty() && bvh.root_aabb().is_none());
+        assert_eq!(
+            bvh.overlaps(&Aabb::from_arrays([-1e9; 3], [1e9; 3]))
+                .count(),
+            0
+        );
+        let ray = Ray::new(Point3::origin(), Vector3::x());
+        assert!(bvh
+            .cast_ray(&ray, f32::INFINITY, |_, _| Some(0.0))
+            .is_none());
+        assert!(bvh
+            .nearest(&Point3::origin(), f32::INFINITY, |_, _| Some(0.0))
+            .is_none());
+        assert!(bvh.par_self_pairs().is_empty());
+        assert_eq!(bvh.stats().sah_cost, 0.0);
+    }
+}
+
+#[test]
+fn bad_options_and_lengths_are_errors() {
+    let boxes = [Aabb::from_arrays([0.0; 3], [1.0; 3])];
+    let bad_leaf = BuildOptions {
+        max_leaf_size: 0,
+        ..Default::default()
+    };
+    assert!(matches!(
+        Bvh::build(&boxes, bad_leaf),
+        Err(BvhError::InvalidOptions(_))
+    ));
+    let bad_bins = BuildOptions {
+        bins: 1,
+        ..Default::default()
+    };
+    assert!(matches!(
+        Bvh::build(&boxes, bad_bins),
+        Err(BvhError::InvalidOptions(_))
+    ));
+    let bad_cost = BuildOptions {
+        traversal_cost: f32::NAN,
+        ..Default::default()
+    };
+    assert!(matches!(
+        Bvh::build(&boxes, bad_cost),
+        Err(BvhError::InvalidOptions(_))
+    ));
+    let mut bvh = Bvh::build(&boxes, BuildOptions::default()).unwrap();
+    assert_eq!(
+        bvh.refit(&[]),
+        Err(BvhError::LengthMismatch {
+            expected: 1,
+            got: 0
+        })
+    );
+}
+
+#[test]
+fn huge_coordinates_build_and_query() {
+    let m = f32::MAX;
+    let boxes = vec![
+        Aabb::from_arrays([-m; 3], [m; 3]),
+        Aabb::from_arrays([m / 2.0; 3], [m; 3]),
+        Aabb::from_arrays([-m; 3], [-m / 2.0; 3]),
+        Aabb::from_arrays([0.0; 3], [0.0; 3]),
+    ];
+    for builder in [Builder::BinnedSah, Builder::Lbvh] {
+        let bvh = build_checked(
+            &boxes,
+            BuildOptions::default()
+                .with_builder(builder)
+                .with_max_leaf_size(1),
+        );
+        assert!(bvh.stats().sah_cost.is_finite());
+        assert_eq!(sorted(bvh.par_self_pairs()), brute_self_pairs(&boxes));
+    }
+}
+
+/// Deterministic pseudo-random boxes for the larger tests below.
+fn lcg_boxes(n: usize, seed: u64) -> Vec<Aabb> {
+    let mut s = seed;
+    let mut next = move || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((s >> 40) as f32) / (1u64 << 24) as f32
+    };
+    let side = (n as f32).cbrt() * 2.0;
+    (0..n)
+        .map(|_| {
+            let c = Point3::new(next() * side, next() * side, next() * side);
+            let h = Vector3::new(
+                0.05 + next() * 0.45,
+                0.05 + next() * 0.45,
+                0.05 + next() * 0.45,
+            );
+            Aabb::from_center_half_extents(c, h)
+        })
+        .collect()
+}
+
+#[test]
+fn builds_and_pairs_do_not_depend_on_thread_count() {
+    let boxes = lcg_boxes(50_000, 42);
+    let pool = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    for builder in [Builder::BinnedSah, Builder::Lbvh] {
+        let opts = BuildOptions::default().with_builder(builder);
+        let one = pool(1).install(|| Bvh::build(&boxes, opts).unwrap());
+        let two = pool(2).install(|| Bvh::build(&boxes, opts).unwrap());
+        let serial = Bvh::build(&boxes, opts.with_parallel(false)).unwrap();
+        one.validate_with_primitives(&boxes).unwrap();
+        assert_eq!(one.nodes(), two.nodes());
+        assert_eq!(one.nodes(), serial.nodes());
+        assert_eq!(one.primitive_indices(), two.primitive_indices());
+        let p1 = pool(1).install(|| one.par_self_pairs());
+        let p2 = pool(2).install(|| one.par_self_pairs());
+        let p3 = pool(3).install(|| one.par_self_pairs());
+        assert_eq!(p1, p2);
+        assert_eq!(p1, p3);
+        let mut serial_pairs = Vec::new();
+        one.self_pairs(|a, b| serial_pairs.push((a, b)));
+        assert_eq!(sorted(p1), sorted(serial_pairs));
+    }
+}
+
+#[test]
+fn sah_tree_is_no_worse_than_lbvh() {
+    let boxes = lcg_boxes(20_000, 7);
+    let sah = Bvh::build(&boxes, BuildOptions::default()).unwrap().stats();
+    let lbvh = Bvh::build(&boxes, BuildOptions::default().with_builder(Builder::Lbvh))
+        .unwrap()
+        .stats();
+    assert!(
+        sah.sah_cost <= lbvh.sah_cost,
+        "SAH {} vs LBVH {}",
+        sah.sah_cost,
+        lbvh.sah_cost
+    );
+    assert!(sah.depth < 64 && lbvh.depth < 64);
+}
