@@ -1,0 +1,443 @@
+//! [`CanopyBroadPhase`]: rapier3d 0.27's `BroadPhase` on canopy-core trees.
+//!
+//! One update, in order:
+//! 1. Removals (before insertions: a removed handle's index may come back in `modified`).
+//!    Pairs of removed or disabled colliders are dropped silently, as Rapier's own broadphase
+//!    does: the narrow phase removes them itself.
+//! 2. Every collider in `modified` is re-examined (Rapier's change flags are private): its box
+//!    (prediction distance, soft-CCD), its filter inputs and its tree. A proxy whose exact box
+//!    left its fat box, whose filter changed, or that is new, goes into the move buffer.
+//!    Invalid boxes (NaN, infinite) take the proxy out of the trees and delete its pairs.
+//! 3. Trees are refit or rebuilt (`proxy_tree.rs`).
+//! 4. Deletions: only pairs of moved proxies are checked; a pair goes when the fat boxes
+//!    separate or the filter now rejects it.
+//! 5. New pairs: each moved proxy queries the trees it may pair with (fixed colliders never
+//!    query the fixed tree unless some collider enables fixed-fixed contacts), in parallel,
+//!    merged in move-buffer order so the events do not depend on the thread count.
+
+use crate::config::CanopyBroadPhaseConfig;
+use crate::filter::{FilterData, Mobility};
+use crate::pair_set::PairSet;
+use crate::proxy::{Loc, Proxy};
+use crate::proxy_tree::ProxyTree;
+use crate::stats::BroadPhaseStats;
+use canopy_core::Aabb;
+use rapier3d::prelude::*;
+use rayon::prelude::*;
+
+/// Moved proxies are queried in chunks of this many; the chunking (not the thread count) fixes
+/// the order in which results are merged.
+const QUERY_CHUNK: usize = 64;
+
+/// A broadphase for Rapier built on canopy-core BVHs: fat boxes, one tree per mobility
+/// (fixed, kinematic, dynamic), a move buffer, per-proxy pair lists and pair filtering at the
+/// source. Swap it in wherever Rapier takes a `&mut dyn BroadPhase`.
+///
+/// ```
+/// use canopy_rapier::CanopyBroadPhase;
+/// use rapier3d::prelude::*;
+///
+/// let mut bodies = RigidBodySet::new();
+/// let mut colliders = ColliderSet::new();
+/// colliders.insert(ColliderBuilder::cuboid(10.0, 0.1, 10.0));
+/// let ball = bodies.insert(RigidBodyBuilder::dynamic().translation(vector![0.0, 1.0, 0.0]));
+/// colliders.insert_with_parent(ColliderBuilder::ball(0.5), ball, &mut bodies);
+///
+/// let mut broad_phase = CanopyBroadPhase::new();
+/// let (mut pipeline, mut islands, mut narrow_phase) =
+///     (PhysicsPipeline::new(), IslandManager::new(), NarrowPhase::new());
+/// let (mut joints, mut multibody_joints, mut ccd) =
+///     (ImpulseJointSet::new(), MultibodyJointSet::new(), CCDSolver::new());
+/// for _ in 0..120 {
+///     pipeline.step(
+///         &vector![0.0, -9.81, 0.0], &IntegrationParameters::default(), &mut islands,
+///         &mut broad_phase, &mut narrow_phase, &mut bodies, &mut colliders, &mut joints,
+///         &mut multibody_joints, &mut ccd, &(), &(),
+///     );
+/// }
+/// // The ball rests on the ground.
+/// let y = bodies[ball].translation().y;
+/// assert!((y - 0.6).abs() < 0.05, "ball at {y}");
+/// assert_eq!(broad_phase.stats().pairs, 1);
+/// ```
+#[derive(Clone, Debug, Default)]
+pub struct CanopyBroadPhase {
+    config: CanopyBroadPhaseConfig,
+    /// Indexed by the collider handle's index.
+    proxies: Vec<Option<Proxy>>,
+    trees: [ProxyTree; 3],
+    pairs: PairSet,
+    moved: Vec<u32>,
+    stats: BroadPhaseStats,
+    /// Number of proxies whose `active_collision_types` allow fixed-fixed contacts.
+    fixed_fixed: usize,
+}
+
+impl CanopyBroadPhase {
+    /// A broadphase with the default configuration.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// A broadphase with the given configuration.
+    pub fn with_config(config: CanopyBroadPhaseConfig) -> Self {
+        Self { config, ..Default::default() }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &CanopyBroadPhaseConfig {
+        &self.config
+    }
+
+    /// Counts of what the broadphase holds and what its last update did.
+    pub fn stats(&self) -> BroadPhaseStats {
+        let mut s = self.stats;
+        s.proxies = [0, 1, 2].map(|i| self.trees[i].len());
+        s.pairs = self.pairs.len();
+        s.rebuilds = self.trees.iter().map(|t| t.rebuilds).sum();
+        s.refits = self.trees.iter().map(|t| t.refits).sum();
+        s
+    }
+
+    /// `true` when the pair of colliders is live (reported by `AddPair` and not deleted since).
+    pub fn contains_pair(&self, a: ColliderHandle, b: ColliderHandle) -> bool {
+        match (self.proxy_id(a), self.proxy_id(b)) {
+            (Some(x), Some(y)) => self.pairs.contains(x, y),
+            _ => false,
+        }
+    }
+
+    /// Every live pair, in no particular order.
+    pub fn pairs(&self) -> impl Iterator<Item = (ColliderHandle, ColliderHandle)> + '_ {
+        self.pairs.iter().filter_map(|(a, b)| {
+            let pa = self.proxies.get(a as usize)?.as_ref()?;
+            let pb = self.proxies.get(b as usize)?.as_ref()?;
+            Some((pa.handle, pb.handle))
+        })
+    }
+
+    /// The fat box stored for a collider, `None` when it is not in the broadphase (unknown,
+    /// removed, disabled, or with an invalid box).
+    pub fn fat_aabb(&self, handle: ColliderHandle) -> Option<Aabb> {
+        let p = self.proxy(handle)?;
+        p.is_valid().then_some(p.fat)
+    }
+
+    fn proxy_id(&self, handle: ColliderHandle) -> Option<u32> {
+        self.proxy(handle).map(|_| handle.into_raw_parts().0)
+    }
+
+    fn proxy(&self, handle: ColliderHandle) -> Option<&Proxy> {
+        let p = self.proxies.get(handle.into_raw_parts().0 as usize)?.as_ref()?;
+        (p.handle == handle).then_some(p)
+    }
+
+    /// Drops a proxy and its pairs without events (the collider is gone or disabled).
+    fn remove_proxy(&mut self, id: u32) {
+        let Some(mut p) = self.proxies[id as usize].take() else {
+            return;
+        };
+        self.take_out_of_tree(&mut p);
+        if p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED) {
+            self.fixed_fixed -= 1;
+        }
+        if !p.is_valid() {
+            self.stats.invalid -= 1;
+        }
+        self.pairs.remove_all(id);
+    }
+
+    fn take_out_of_tree(&mut self, p: &mut Proxy) {
+        if let Some((other, i)) = self.trees[p.mobility as usize].remove(p) {
+            if let Some(o) = self.proxies[other as usize].as_mut() {
+                o.loc = Loc::Pending(i);
+            }
+        }
+    }
+
+    fn mark_moved(&mut self, id: u32) {
+        let p = self.proxies[id as usize].as_mut().expect("live proxy");
+        if !p.moved {
+            p.moved = true;
+            self.moved.push(id);
+        }
+    }
+
+    /// The box the narrow phase needs covered: Rapier's collision box (prediction distance),
+    /// merged with the box at the soft-CCD predicted pose.
+    fn collision_aabb(
+        params: &IntegrationParameters,
+        collider: &Collider,
+        bodies: &RigidBodySet,
+    ) -> Aabb {
+        let prediction = params.prediction_distance();
+        let mut aabb = collider.compute_collision_aabb(prediction / 2.0);
+        if let Some(rb) = collider.parent().and_then(|h| bodies.get(h)) {
+            let max_dist = rb.soft_ccd_prediction();
+            if max_dist > 0.0 {
+                // Rapier clamps the predicted motion to `max_dist`; its exact helper is private,
+                // so clamp the time step the same way from the current velocity.
+                let speed = rb.linvel().norm();
+                let dt = if speed * params.dt > max_dist { max_dist / speed } else { params.dt };
+                let pose = rb.predict_position_using_velocity_and_forces(dt)
+                    * collider.position_wrt_parent().copied().unwrap_or_else(Isometry::identity);
+                let next = collider
+                    .shape()
+                    .compute_aabb(&pose)
+                    .loosened(collider.contact_skin() + prediction / 2.0);
+                aabb.merge(&next);
+            }
+        }
+        Aabb::new(aabb.mins, aabb.maxs)
+    }
+
+    /// Step 2 for one collider.
+    #[allow(clippy::too_many_arguments)]
+    fn examine(
+        &mut self,
+        params: &IntegrationParameters,
+        colliders: &ColliderSet,
+        bodies: &RigidBodySet,
+        handle: ColliderHandle,
+        margin: f32,
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) {
+        let id = handle.into_raw_parts().0;
+        let Some(collider) = colliders.get(handle) else {
+            return;
+        };
+        if let Some(Some(p)) = self.proxies.get(id as usize) {
+            if p.handle != handle {
+                // A stale proxy under a reused index (its removal was not reported).
+                self.remove_proxy(id);
+            }
+        }
+        if !collider.is_enabled() {
+            // Disabled colliders also arrive in `removed`; make sure nothing is left.
+            self.remove_proxy(id);
+            return;
+        }
+        let tight = Self::collision_aabb(params, collider, bodies);
+        let filter = FilterData::of(collider, bodies);
+        let mobility = Mobility::of(filter.body_type);
+        let fat = tight.loosened(margin);
+        let valid = tight.is_valid() && fat.is_valid();
+
+        if id as usize >= self.proxies.len() {
+            self.proxies.resize_with(id as usize + 1, || None);
+        }
+        let existing = self.proxies[id as usize].take();
+        let mut p = match existing {
+            Some(p) => p,
+            None => {
+                if filter.active.contains(ActiveCollisionTypes::FIXED_FIXED) {
+                    self.fixed_fixed += 1;
+                }
+                let mut p = Proxy {
+                    handle,
+                    fat,
+                    filter,
+                    mobility,
+                    loc: Loc::Out,
+                    moved: false,
+                };
+                if valid {
+                    self.trees[mobility as usize].insert(id, &mut p);
+                } else {
+                    self.stats.invalid += 1;
+                }
+                self.proxies[id as usize] = Some(p);
+                if valid {
+                    self.mark_moved(id);
+                }
+                return;
+            }
+        };
+
+        if !valid {
+            if p.is_valid() {
+                self.take_out_of_tree(&mut p);
+                self.stats.invalid += 1;
+                self.proxies[id as usize] = Some(p);
+                for other in self.pairs.remove_all(id) {
+                    self.push_delete(id, other, events);
+                }
+            } else {
+                self.proxies[id as usize] = Some(p);
+            }
+            return;
+        }
+
+        let mut moved = false;
+        if p.filter != filter {
+            let had_ff = p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED);
+            let has_ff = filter.active.contains(ActiveCollisionTypes::FIXED_FIXED);
+            self.fixed_fixed = self.fixed_fixed + has_ff as usize - had_ff as usize;
+            p.filter = filter;
+            moved = true;
+        }
+        if !p.is_valid() || p.mobility != mobility {
+            if p.is_valid() {
+                self.take_out_of_tree(&mut p);
+            } else {
+                self.stats.invalid -= 1;
+            }
+            p.mobility = mobility;
+            p.fat = fat;
+            self.trees[mobility as usize].insert(id, &mut p);
+            moved = true;
+        } else if !p.fat.contains(&tight) {
+            p.fat = fat;
+            self.trees[mobility as usize].set_box(&p);
+            moved = true;
+        } else if moved {
+            // A filter change can widen what the tree summary must cover.
+            self.trees[mobility as usize].summary.add(&p.filter);
+        }
+        self.proxies[id as usize] = Some(p);
+        if moved {
+            self.mark_moved(id);
+        }
+    }
+
+    fn push_delete(&self, a: u32, b: u32, events: &mut Vec<BroadPhasePairEvent>) {
+        let (a, b) = if a < b { (a, b) } else { (b, a) };
+        let (pa, pb) = (&self.proxies[a as usize], &self.proxies[b as usize]);
+        if let (Some(pa), Some(pb)) = (pa, pb) {
+            events.push(BroadPhasePairEvent::DeletePair(ColliderPair::new(pa.handle, pb.handle)));
+        }
+    }
+
+    /// Step 5 for one moved proxy: partners it should have, as `(id, other)`.
+    fn find_pairs(&self, id: u32, out: &mut Vec<(u32, u32)>) {
+        let Some(p) = &self.proxies[id as usize] else {
+            return;
+        };
+        if !p.is_valid() {
+            return;
+        }
+        for m in Mobility::ALL {
+            let tree = &self.trees[m as usize];
+            if tree.len() == 0 {
+                continue;
+            }
+            if m == Mobility::Fixed && p.mobility == Mobility::Fixed && self.fixed_fixed == 0 {
+                continue;
+            }
+            if !tree.summary.may_pair_with(&p.filter) {
+                continue;
+            }
+            tree.query(&p.fat, &self.proxies, |other| {
+                if other == id {
+                    return;
+                }
+                let Some(o) = &self.proxies[other as usize] else {
+                    return;
+                };
+                // When both moved, the one with the smaller id reports the pair.
+                if o.moved && other < id {
+                    return;
+                }
+                if p.filter.may_pair(&o.filter) {
+                    out.push((id, other));
+                }
+            });
+        }
+    }
+}
+
+impl BroadPhase for CanopyBroadPhase {
+    fn update(
+        &mut self,
+        params: &IntegrationParameters,
+        colliders: &ColliderSet,
+        bodies: &RigidBodySet,
+        modified_colliders: &[ColliderHandle],
+        removed_colliders: &[ColliderHandle],
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) {
+        let events_before = events.len();
+        // 1. Removals first.
+        for &handle in removed_colliders {
+            if self.proxy(handle).is_some() {
+                self.remove_proxy(handle.into_raw_parts().0);
+            }
+        }
+
+        // 2. Re-examine every modified collider.
+        let margin = self.config.margin * params.length_unit;
+        for &handle in modified_colliders {
+            self.examine(params, colliders, bodies, handle, margin, events);
+        }
+
+        // 3. Trees.
+        let policy = self.config.rebuild;
+        for m in Mobility::ALL {
+            let builder = if m == Mobility::Fixed { policy.fixed_builder } else { policy.moving_builder };
+            self.trees[m as usize].maintain(&mut self.proxies, &policy, builder, self.config.parallel);
+        }
+
+        // 4. Deletions among the pairs of moved proxies.
+        let moved = std::mem::take(&mut self.moved);
+        let mut gone = Vec::new();
+        for &id in &moved {
+            let Some(p) = &self.proxies[id as usize] else {
+                continue;
+            };
+            for &other in self.pairs.partners(id) {
+                let Some(o) = &self.proxies[other as usize] else {
+                    continue;
+                };
+                if !p.fat.intersects(&o.fat) || !p.filter.may_pair(&o.filter) {
+                    gone.push((id, other));
+                }
+            }
+        }
+        for (a, b) in gone {
+            if self.pairs.remove(a, b) {
+                self.push_delete(a, b, events);
+            }
+        }
+
+        // 5. New pairs.
+        let found: Vec<Vec<(u32, u32)>> = if self.config.parallel && moved.len() > QUERY_CHUNK {
+            moved
+                .par_chunks(QUERY_CHUNK)
+                .map(|chunk| {
+                    let mut out = Vec::new();
+                    for &id in chunk {
+                        self.find_pairs(id, &mut out);
+                    }
+                    out
+                })
+                .collect()
+        } else {
+            let mut out = Vec::new();
+            for &id in &moved {
+                self.find_pairs(id, &mut out);
+            }
+            vec![out]
+        };
+        let deleted = events.len() - events_before;
+        for (a, b) in found.into_iter().flatten() {
+            if self.pairs.insert(a, b) {
+                let (a, b) = if a < b { (a, b) } else { (b, a) };
+                let (pa, pb) = (&self.proxies[a as usize], &self.proxies[b as usize]);
+                if let (Some(pa), Some(pb)) = (pa, pb) {
+                    events.push(BroadPhasePairEvent::AddPair(ColliderPair::new(pa.handle, pb.handle)));
+                }
+            }
+        }
+
+        for &id in &moved {
+            if let Some(p) = self.proxies[id as usize].as_mut() {
+                p.moved = false;
+            }
+        }
+        self.stats.moved = moved.len();
+        self.stats.deleted = deleted;
+        self.stats.added = events.len() - events_before - deleted;
+        self.moved = moved;
+        self.moved.clear();
+    }
+}

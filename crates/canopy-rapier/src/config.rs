@@ -1,0 +1,60 @@
+//! Configuration of [`crate::CanopyBroadPhase`]: fat-box margin, tree rebuild policy,
+//! parallelism. Every field has a documented default.
+
+use canopy_core::Builder;
+
+/// When and how the trees of moving colliders are rebuilt.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RebuildPolicy {
+    /// Builder for the trees of moving (dynamic and kinematic) colliders. Default: LBVH, the
+    /// fastest build; those trees are refit every step and rebuilt often.
+    pub moving_builder: Builder,
+    /// Builder for the tree of fixed colliders, which rarely changes. Default: binned SAH.
+    pub fixed_builder: Builder,
+    /// Rebuild a refit tree once its SAH cost exceeds this multiple of its cost right after the
+    /// last build. Default: 1.5.
+    pub max_cost_growth: f64,
+    /// New colliders wait in a small unsorted list that is scanned linearly; the tree is rebuilt
+    /// once that list exceeds `max(min_pending, tree size * pending_fraction)`. Defaults: 64 and
+    /// 1/16.
+    pub min_pending: usize,
+    /// See [`RebuildPolicy::min_pending`].
+    pub pending_fraction: f64,
+    /// Removed colliders leave a dead leaf until the next rebuild; rebuild once more than this
+    /// fraction of the tree is dead. Default: 1/4.
+    pub max_dead_fraction: f64,
+}
+
+impl Default for RebuildPolicy {
+    fn default() -> Self {
+        Self {
+            moving_builder: Builder::Lbvh,
+            fixed_builder: Builder::BinnedSah,
+            max_cost_growth: 1.5,
+            min_pending: 64,
+            pending_fraction: 1.0 / 16.0,
+            max_dead_fraction: 0.25,
+        }
+    }
+}
+
+/// Settings of [`crate::CanopyBroadPhase`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CanopyBroadPhaseConfig {
+    /// Margin of the fat boxes, in multiples of `IntegrationParameters::length_unit`. Each
+    /// collider's box is stored enlarged by this much on every side; while its exact box stays
+    /// inside, the collider costs nothing. Larger margins mean fewer updates but more candidate
+    /// pairs. Default: 0.1 (Box2D's `b2_aabbMargin`).
+    pub margin: f32,
+    /// Tree maintenance. See [`RebuildPolicy`].
+    pub rebuild: RebuildPolicy,
+    /// Search new pairs and rebuild trees with rayon (the current pool). Results and event order
+    /// are the same with any number of threads. Default: `true`.
+    pub parallel: bool,
+}
+
+impl Default for CanopyBroadPhaseConfig {
+    fn default() -> Self {
+        Self { margin: 0.1, rebuild: RebuildPolicy::default(), parallel: true }
+    }
+}

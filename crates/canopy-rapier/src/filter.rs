@@ -1,0 +1,102 @@
+//! Which collider pairs the narrow phase would always discard, so that the broadphase never
+//! makes them: same parent body, rigid-body types that neither collider's
+//! `active_collision_types` allows, non-matching collision groups. This is exactly Rapier
+//! 0.27's narrow-phase filter (`NarrowPhase::compute_contacts`), minus the user hooks and
+//! joint rules, which need state the broadphase does not see.
+
+use rapier3d::prelude::*;
+
+/// The inputs of the pair filter for one collider.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct FilterData {
+    pub parent: Option<RigidBodyHandle>,
+    pub body_type: RigidBodyType,
+    pub groups: InteractionGroups,
+    pub active: ActiveCollisionTypes,
+}
+
+impl FilterData {
+    pub fn of(collider: &Collider, bodies: &RigidBodySet) -> Self {
+        let parent = collider.parent();
+        let body_type = parent
+            .and_then(|h| bodies.get(h))
+            .map(|b| b.body_type())
+            .unwrap_or(RigidBodyType::Fixed);
+        Self {
+            parent,
+            body_type,
+            groups: collider.collision_groups(),
+            active: collider.active_collision_types(),
+        }
+    }
+
+    /// `true` when the narrow phase could make contacts between the two colliders.
+    #[inline]
+    pub fn may_pair(&self, other: &FilterData) -> bool {
+        if self.parent.is_some() && self.parent == other.parent {
+            return false;
+        }
+        (self.active.test(self.body_type, other.body_type)
+            || other.active.test(self.body_type, other.body_type))
+            && self.groups.test(other.groups)
+    }
+}
+
+/// The three trees: colliders are sorted by how their parent body moves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Mobility {
+    /// No parent, or a fixed parent.
+    Fixed = 0,
+    /// Kinematic parent (position- or velocity-based).
+    Kinematic = 1,
+    /// Dynamic parent.
+    Dynamic = 2,
+}
+
+impl Mobility {
+    /// All three, in tree order.
+    pub const ALL: [Mobility; 3] = [Mobility::Fixed, Mobility::Kinematic, Mobility::Dynamic];
+
+    pub(crate) fn of(body_type: RigidBodyType) -> Self {
+        match body_type {
+            RigidBodyType::Fixed => Mobility::Fixed,
+            RigidBodyType::Dynamic => Mobility::Dynamic,
+            RigidBodyType::KinematicPositionBased | RigidBodyType::KinematicVelocityBased => {
+                Mobility::Kinematic
+            }
+        }
+    }
+}
+
+/// Summary of the colliders in one tree, to skip querying a tree none of whose members could
+/// pair with a collider. It only ever over-approximates (bits are OR-ed in and reset on rebuild).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct TreeFilterSummary {
+    /// Bit `t` set when a member has body type `t as u32`.
+    pub body_types: u8,
+    /// Union of the members' active collision types.
+    pub active: u16,
+}
+
+const BODY_TYPES: [RigidBodyType; 4] = [
+    RigidBodyType::Dynamic,
+    RigidBodyType::Fixed,
+    RigidBodyType::KinematicPositionBased,
+    RigidBodyType::KinematicVelocityBased,
+];
+
+impl TreeFilterSummary {
+    pub fn add(&mut self, f: &FilterData) {
+        self.body_types |= 1 << f.body_type as u32;
+        self.active |= f.active.bits();
+    }
+
+    /// `false` only when no member of the tree can pair with a collider of filter `f`.
+    pub fn may_pair_with(&self, f: &FilterData) -> bool {
+        let union = ActiveCollisionTypes::from_bits_truncate(self.active);
+        BODY_TYPES.iter().any(|&t| {
+            self.body_types & (1 << t as u32) != 0
+                && (f.active.test(f.body_type, t) || union.test(f.body_type, t))
+        })
+    }
+}

@@ -1,0 +1,24 @@
+//! # canopy-rapier
+//!
+//! [`CanopyBroadPhase`]: a broadphase for rapier3d 0.27 built on canopy-core. Pass it to
+//! `PhysicsPipeline::step` instead of Rapier's `BroadPhaseBvh`; the simulation is the same,
+//! the broadphase time is lower.
+//!
+//! Files: `broad_phase.rs` (the update), `proxy.rs` (per-collider state), `proxy_tree.rs` (one
+//! tree per mobility), `pair_set.rs` (live pairs and per-proxy partner lists), `filter.rs`
+//! (pairs the narrow phase would discard), `config.rs`, `stats.rs`.
+
+#![deny(missing_docs)]
+
+mod broad_phase;
+mod config;
+mod filter;
+mod pair_set;
+mod proxy;
+mod proxy_tree;
+mod stats;
+
+pub use broad_phase::CanopyBroadPhase;
+pub use config::{CanopyBroadPhaseConfig, RebuildPolicy};
+pub use filter::Mobility;
+pub use stats::BroadPhaseStats;

@@ -1,0 +1,35 @@
+//! A proxy: what the broadphase keeps per collider (its handle, fat box, filter inputs, and
+//! where it sits in the trees).
+
+use crate::filter::{FilterData, Mobility};
+use canopy_core::Aabb;
+use rapier3d::prelude::ColliderHandle;
+
+/// Where a proxy is stored in the tree of its mobility.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Loc {
+    /// Leaf `slot` of the tree's BVH.
+    Tree(u32),
+    /// Entry of the tree's pending list, not in the BVH yet.
+    Pending(u32),
+    /// In no tree (its box is invalid).
+    Out,
+}
+
+#[derive(Clone, Debug)]
+pub(crate) struct Proxy {
+    pub handle: ColliderHandle,
+    /// The box stored in the tree: the exact box enlarged by the margin.
+    pub fat: Aabb,
+    pub filter: FilterData,
+    pub mobility: Mobility,
+    pub loc: Loc,
+    /// In the move buffer this step.
+    pub moved: bool,
+}
+
+impl Proxy {
+    pub fn is_valid(&self) -> bool {
+        self.loc != Loc::Out
+    }
+}

@@ -1,0 +1,155 @@
+//! One tree of proxies (fixed, kinematic or dynamic): a canopy-core [`Bvh`] over fat boxes,
+//! a pending list for proxies added since the last build, and dead slots for proxies removed
+//! since then. Refit when boxes change; rebuilt when the pending list or the dead slots grow
+//! too large, or the SAH cost has drifted (see [`crate::RebuildPolicy`]).
+
+use crate::config::RebuildPolicy;
+use crate::filter::TreeFilterSummary;
+use crate::proxy::{Loc, Proxy};
+use canopy_core::{Aabb, BuildOptions, Builder, Bvh};
+
+/// Marks a slot whose proxy has left the tree.
+pub(crate) const DEAD: u32 = u32::MAX;
+
+#[derive(Clone, Debug, Default)]
+pub(crate) struct ProxyTree {
+    pub bvh: Bvh,
+    /// Fat box of each BVH slot (dead slots keep their last box until the next rebuild).
+    pub boxes: Vec<Aabb>,
+    /// Proxy id of each BVH slot, or [`DEAD`].
+    pub members: Vec<u32>,
+    pub pending: Vec<u32>,
+    pub dead: usize,
+    /// Some slot box changed since the last refit.
+    pub dirty: bool,
+    pub summary: TreeFilterSummary,
+    built_cost: f64,
+    pub rebuilds: u64,
+    pub refits: u64,
+}
+
+impl ProxyTree {
+    /// Live proxies (tree and pending).
+    pub fn len(&self) -> usize {
+        self.members.len() - self.dead + self.pending.len()
+    }
+
+    pub fn insert(&mut self, id: u32, proxy: &mut Proxy) {
+        proxy.loc = Loc::Pending(self.pending.len() as u32);
+        self.pending.push(id);
+        self.summary.add(&proxy.filter);
+    }
+
+    /// Takes `proxy` out; returns the proxy id whose pending index changed, if any.
+    pub fn remove(&mut self, proxy: &mut Proxy) -> Option<(u32, u32)> {
+        let moved = match proxy.loc {
+            Loc::Tree(slot) => {
+                self.members[slot as usize] = DEAD;
+                self.dead += 1;
+                None
+            }
+            Loc::Pending(i) => {
+                self.pending.swap_remove(i as usize);
+                self.pending.get(i as usize).map(|&other| (other, i))
+            }
+            Loc::Out => None,
+        };
+        proxy.loc = Loc::Out;
+        moved
+    }
+
+    /// Records a new fat box for a proxy of this tree.
+    pub fn set_box(&mut self, proxy: &Proxy) {
+        if let Loc::Tree(slot) = proxy.loc {
+            self.boxes[slot as usize] = proxy.fat;
+            self.dirty = true;
+        }
+    }
+
+    fn needs_rebuild(&self, policy: &RebuildPolicy) -> bool {
+        let size = self.members.len() as f64;
+        self.pending.len() > policy.min_pending.max((size * policy.pending_fraction) as usize)
+            || (self.dead > 0 && self.dead as f64 > size * policy.max_dead_fraction)
+    }
+
+    /// Brings the BVH up to date: rebuild or refit as the policy says.
+    pub fn maintain(
+        &mut self,
+        proxies: &mut [Option<Proxy>],
+        policy: &RebuildPolicy,
+        builder: Builder,
+        parallel: bool,
+    ) {
+        if self.needs_rebuild(policy) {
+            self.rebuild(proxies, builder, parallel);
+        } else if self.dirty {
+            self.dirty = false;
+            self.refits += 1;
+            if self.bvh.refit(&self.boxes).is_err() {
+                // Boxes are validated before they reach the tree; rebuilding is the safe answer
+                // should that ever fail.
+                self.rebuild(proxies, builder, parallel);
+                return;
+            }
+            if self.bvh.sah_cost(1.0, 1.0) > self.built_cost * policy.max_cost_growth {
+                self.rebuild(proxies, builder, parallel);
+            }
+        }
+    }
+
+    pub fn rebuild(&mut self, proxies: &mut [Option<Proxy>], builder: Builder, parallel: bool) {
+        let mut members: Vec<u32> = self.members.iter().copied().filter(|&m| m != DEAD).collect();
+        members.append(&mut self.pending);
+        let mut boxes = Vec::with_capacity(members.len());
+        self.summary = TreeFilterSummary::default();
+        for (slot, &id) in members.iter().enumerate() {
+            let p = proxies[id as usize].as_mut().expect("tree member has a proxy");
+            p.loc = Loc::Tree(slot as u32);
+            boxes.push(p.fat);
+            self.summary.add(&p.filter);
+        }
+        let options = BuildOptions { builder, parallel, ..Default::default() };
+        // Fat boxes are checked before they enter a tree, so the build cannot fail; an empty
+        // tree (and every member pending again) would be the safe fallback.
+        match Bvh::build(&boxes, options) {
+            Ok(bvh) => {
+                self.bvh = bvh;
+                self.members = members;
+                self.boxes = boxes;
+            }
+            Err(_) => {
+                self.bvh = Bvh::new();
+                self.boxes.clear();
+                self.members.clear();
+                for (i, &id) in members.iter().enumerate() {
+                    if let Some(p) = proxies[id as usize].as_mut() {
+                        p.loc = Loc::Pending(i as u32);
+                    }
+                }
+                self.pending = members;
+            }
+        }
+        self.dead = 0;
+        self.dirty = false;
+        self.built_cost = self.bvh.sah_cost(1.0, 1.0);
+        self.rebuilds += 1;
+    }
+
+    /// Calls `f` with every live proxy id whose fat box overlaps `aabb` (tree and pending).
+    #[inline]
+    pub fn query(&self, aabb: &Aabb, proxies: &[Option<Proxy>], mut f: impl FnMut(u32)) {
+        for slot in self.bvh.overlaps(aabb) {
+            let id = self.members[slot as usize];
+            if id != DEAD {
+                f(id);
+            }
+        }
+        for &id in &self.pending {
+            if let Some(p) = &proxies[id as usize] {
+                if p.fat.intersects(aabb) {
+                    f(id);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,23 @@
+//! [`BroadPhaseStats`]: counts that tell what the broadphase did and holds.
+
+/// What [`crate::CanopyBroadPhase`] holds and what its last update did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BroadPhaseStats {
+    /// Colliders in the fixed, kinematic and dynamic trees (including pending ones).
+    pub proxies: [usize; 3],
+    /// Colliders left out of the trees because their box has a NaN or infinite coordinate.
+    /// They come back as soon as their box is valid again.
+    pub invalid: usize,
+    /// Live pairs.
+    pub pairs: usize,
+    /// Proxies whose fat box or filter changed in the last update (the move buffer).
+    pub moved: usize,
+    /// `AddPair` events of the last update.
+    pub added: usize,
+    /// `DeletePair` events of the last update.
+    pub deleted: usize,
+    /// Tree rebuilds since creation (all trees).
+    pub rebuilds: u64,
+    /// Tree refits since creation (all trees).
+    pub refits: u64,
+}
