@@ -81,7 +81,10 @@ impl CanopyBroadPhase {
 
     /// A broadphase with the given configuration.
     pub fn with_config(config: CanopyBroadPhaseConfig) -> Self {
-        Self { config, ..Default::default() }
+        Self {
+            config,
+            ..Default::default()
+        }
     }
 
     /// The configuration.
@@ -128,13 +131,16 @@ impl CanopyBroadPhase {
     }
 
     fn proxy(&self, handle: ColliderHandle) -> Option<&Proxy> {
-        let p = self.proxies.get(handle.into_raw_parts().0 as usize)?.as_ref()?;
+        let p = self
+            .proxies
+            .get(handle.into_raw_parts().0 as usize)?
+            .as_ref()?;
         (p.handle == handle).then_some(p)
     }
 
     /// Drops a proxy and its pairs without events (the collider is gone or disabled).
     fn remove_proxy(&mut self, id: u32) {
-        let Some(mut p) = self.proxies[id as usize].take() else {
+        let Some(mut p) = self.proxies.get_mut(id as usize).and_then(Option::take) else {
             return;
         };
         self.take_out_of_tree(&mut p);
@@ -178,9 +184,16 @@ impl CanopyBroadPhase {
                 // Rapier clamps the predicted motion to `max_dist`; its exact helper is private,
                 // so clamp the time step the same way from the current velocity.
                 let speed = rb.linvel().norm();
-                let dt = if speed * params.dt > max_dist { max_dist / speed } else { params.dt };
+                let dt = if speed * params.dt > max_dist {
+                    max_dist / speed
+                } else {
+                    params.dt
+                };
                 let pose = rb.predict_position_using_velocity_and_forces(dt)
-                    * collider.position_wrt_parent().copied().unwrap_or_else(Isometry::identity);
+                    * collider
+                        .position_wrt_parent()
+                        .copied()
+                        .unwrap_or_else(Isometry::identity);
                 let next = collider
                     .shape()
                     .compute_aabb(&pose)
@@ -304,7 +317,9 @@ impl CanopyBroadPhase {
         let (a, b) = if a < b { (a, b) } else { (b, a) };
         let (pa, pb) = (&self.proxies[a as usize], &self.proxies[b as usize]);
         if let (Some(pa), Some(pb)) = (pa, pb) {
-            events.push(BroadPhasePairEvent::DeletePair(ColliderPair::new(pa.handle, pb.handle)));
+            events.push(BroadPhasePairEvent::DeletePair(ColliderPair::new(
+                pa.handle, pb.handle,
+            )));
         }
     }
 
@@ -373,8 +388,17 @@ impl BroadPhase for CanopyBroadPhase {
         // 3. Trees.
         let policy = self.config.rebuild;
         for m in Mobility::ALL {
-            let builder = if m == Mobility::Fixed { policy.fixed_builder } else { policy.moving_builder };
-            self.trees[m as usize].maintain(&mut self.proxies, &policy, builder, self.config.parallel);
+            let builder = if m == Mobility::Fixed {
+                policy.fixed_builder
+            } else {
+                policy.moving_builder
+            };
+            self.trees[m as usize].maintain(
+                &mut self.proxies,
+                &policy,
+                builder,
+                self.config.parallel,
+            );
         }
 
         // 4. Deletions among the pairs of moved proxies.
@@ -424,7 +448,9 @@ impl BroadPhase for CanopyBroadPhase {
                 let (a, b) = if a < b { (a, b) } else { (b, a) };
                 let (pa, pb) = (&self.proxies[a as usize], &self.proxies[b as usize]);
                 if let (Some(pa), Some(pb)) = (pa, pb) {
-                    events.push(BroadPhasePairEvent::AddPair(ColliderPair::new(pa.handle, pb.handle)));
+                    events.push(BroadPhasePairEvent::AddPair(ColliderPair::new(
+                        pa.handle, pb.handle,
+                    )));
                 }
             }
         }

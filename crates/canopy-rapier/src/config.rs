@@ -55,6 +55,10 @@ pub struct CanopyBroadPhaseConfig {
 
 impl Default for CanopyBroadPhaseConfig {
     fn default() -> Self {
-        Self { margin: 0.1, rebuild: RebuildPolicy::default(), parallel: true }
+        Self {
+            margin: 0.1,
+            rebuild: RebuildPolicy::default(),
+            parallel: true,
+        }
     }
 }

@@ -59,7 +59,10 @@ impl PairSet {
 
     /// Partners of `a`.
     pub fn partners(&self, a: u32) -> &[u32] {
-        self.adjacency.get(a as usize).map(Vec::as_slice).unwrap_or(&[])
+        self.adjacency
+            .get(a as usize)
+            .map(Vec::as_slice)
+            .unwrap_or(&[])
     }
 
     /// Removes every pair of `a` and returns the former partners, in adjacency order.

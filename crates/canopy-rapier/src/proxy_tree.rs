@@ -68,7 +68,10 @@ impl ProxyTree {
 
     fn needs_rebuild(&self, policy: &RebuildPolicy) -> bool {
         let size = self.members.len() as f64;
-        self.pending.len() > policy.min_pending.max((size * policy.pending_fraction) as usize)
+        self.pending.len()
+            > policy
+                .min_pending
+                .max((size * policy.pending_fraction) as usize)
             || (self.dead > 0 && self.dead as f64 > size * policy.max_dead_fraction)
     }
 
@@ -98,17 +101,28 @@ impl ProxyTree {
     }
 
     pub fn rebuild(&mut self, proxies: &mut [Option<Proxy>], builder: Builder, parallel: bool) {
-        let mut members: Vec<u32> = self.members.iter().copied().filter(|&m| m != DEAD).collect();
+        let mut members: Vec<u32> = self
+            .members
+            .iter()
+            .copied()
+            .filter(|&m| m != DEAD)
+            .collect();
         members.append(&mut self.pending);
         let mut boxes = Vec::with_capacity(members.len());
         self.summary = TreeFilterSummary::default();
         for (slot, &id) in members.iter().enumerate() {
-            let p = proxies[id as usize].as_mut().expect("tree member has a proxy");
+            let p = proxies[id as usize]
+                .as_mut()
+                .expect("tree member has a proxy");
             p.loc = Loc::Tree(slot as u32);
             boxes.push(p.fat);
             self.summary.add(&p.filter);
         }
-        let options = BuildOptions { builder, parallel, ..Default::default() };
+        let options = BuildOptions {
+            builder,
+            parallel,
+            ..Default::default()
+        };
         // Fat boxes are checked before they enter a tree, so the build cannot fail; an empty
         // tree (and every member pending again) would be the safe fallback.
         match Bvh::build(&boxes, options) {

@@ -1,0 +1,474 @@
+//! The Rapier broadphase contract, tested on random worlds under random edits: after every
+//! update, every pair the narrow phase needs (collision boxes overlap, not filtered) is live;
+//! no live pair involves a removed or disabled collider or is filtered; the event stream
+//! replays to exactly the live pair set; and the events are the same with 1 and 2 threads.
+//!
+//! The truth is brute force over all collider pairs, with Rapier's filter rules re-stated here
+//! from `NarrowPhase::compute_contacts` (independently of `filter.rs`).
+
+use canopy_rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig};
+use proptest::prelude::*;
+use rapier3d::prelude::*;
+use std::collections::HashSet;
+
+type Pair = (ColliderHandle, ColliderHandle);
+
+fn key(a: ColliderHandle, b: ColliderHandle) -> Pair {
+    if a.into_raw_parts() < b.into_raw_parts() {
+        (a, b)
+    } else {
+        (b, a)
+    }
+}
+
+/// A broadphase wrapper that checks the contract after each update and logs the events.
+struct Checked {
+    inner: CanopyBroadPhase,
+    /// The pair set replayed from the events.
+    replay: HashSet<Pair>,
+    log: Vec<(bool, Pair)>,
+    violations: Vec<String>,
+    updates: usize,
+    checked_pairs: usize,
+}
+
+impl Checked {
+    fn new(config: CanopyBroadPhaseConfig) -> Self {
+        Self {
+            inner: CanopyBroadPhase::with_config(config),
+            replay: HashSet::new(),
+            log: Vec::new(),
+            violations: Vec::new(),
+            updates: 0,
+            checked_pairs: 0,
+        }
+    }
+}
+
+fn body_type(c: &Collider, bodies: &RigidBodySet) -> RigidBodyType {
+    c.parent()
+        .map(|h| bodies[h].body_type())
+        .unwrap_or(RigidBodyType::Fixed)
+}
+
+fn narrow_phase_needs(c1: &Collider, c2: &Collider, bodies: &RigidBodySet) -> bool {
+    if c1.parent().is_some() && c1.parent() == c2.parent() {
+        return false;
+    }
+    let (t1, t2) = (body_type(c1, bodies), body_type(c2, bodies));
+    (c1.active_collision_types().test(t1, t2) || c2.active_collision_types().test(t1, t2))
+        && c1.collision_groups().test(c2.collision_groups())
+}
+
+fn valid(a: &rapier3d::parry::bounding_volume::Aabb) -> bool {
+    a.mins.iter().chain(a.maxs.iter()).all(|c| c.is_finite())
+}
+
+impl BroadPhase for Checked {
+    fn update(
+        &mut self,
+        params: &IntegrationParameters,
+        colliders: &ColliderSet,
+        bodies: &RigidBodySet,
+        modified: &[ColliderHandle],
+        removed: &[ColliderHandle],
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) {
+        let start = events.len();
+        self.inner
+            .update(params, colliders, bodies, modified, removed, events);
+        self.updates += 1;
+        // Replay: removed and disabled colliders lose their pairs silently.
+        self.replay.retain(|(a, b)| {
+            colliders.get(*a).is_some_and(|c| c.is_enabled())
+                && colliders.get(*b).is_some_and(|c| c.is_enabled())
+        });
+        for e in &events[start..] {
+            match e {
+                BroadPhasePairEvent::AddPair(p) => {
+                    let k = key(p.collider1, p.collider2);
+                    if !self.replay.insert(k) {
+                        self.violations.push(format!("AddPair of live pair {k:?}"));
+                    }
+                    self.log.push((true, k));
+                }
+                BroadPhasePairEvent::DeletePair(p) => {
+                    let k = key(p.collider1, p.collider2);
+                    if !self.replay.remove(&k) {
+                        self.violations
+                            .push(format!("DeletePair of dead pair {k:?}"));
+                    }
+                    self.log.push((false, k));
+                }
+            }
+        }
+        let live: HashSet<Pair> = self.inner.pairs().map(|(a, b)| key(a, b)).collect();
+        if live != self.replay {
+            self.violations.push(format!(
+                "update {}: event replay differs from the live set ({} vs {})",
+                self.updates,
+                self.replay.len(),
+                live.len()
+            ));
+        }
+        let prediction = params.prediction_distance() / 2.0;
+        let all: Vec<(ColliderHandle, &Collider, _)> = colliders
+            .iter()
+            .filter(|(_, c)| c.is_enabled())
+            .map(|(h, c)| (h, c, c.compute_collision_aabb(prediction)))
+            .collect();
+        for (i, (h1, c1, a1)) in all.iter().enumerate() {
+            for (h2, c2, a2) in &all[i + 1..] {
+                if valid(a1) && valid(a2) && a1.intersects(a2) && narrow_phase_needs(c1, c2, bodies)
+                {
+                    self.checked_pairs += 1;
+                    if !self.inner.contains_pair(*h1, *h2) {
+                        self.violations.push(format!(
+                            "update {}: missing pair {h1:?} {h2:?}",
+                            self.updates
+                        ));
+                    }
+                }
+            }
+        }
+        for (a, b) in &live {
+            let (Some(c1), Some(c2)) = (colliders.get(*a), colliders.get(*b)) else {
+                self.violations
+                    .push(format!("live pair with a removed collider {a:?} {b:?}"));
+                continue;
+            };
+            if !c1.is_enabled() || !c2.is_enabled() || !narrow_phase_needs(c1, c2, bodies) {
+                self.violations.push(format!(
+                    "live pair that the narrow phase discards {a:?} {b:?}"
+                ));
+            }
+        }
+    }
+}
+
+/// Small deterministic PRNG for world generation and edits.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn f(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+}
+
+struct Sim {
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    islands: IslandManager,
+    narrow: NarrowPhase,
+    pipeline: PhysicsPipeline,
+    joints: ImpulseJointSet,
+    multibody: MultibodyJointSet,
+    ccd: CCDSolver,
+    params: IntegrationParameters,
+}
+
+const TYPES: [RigidBodyType; 4] = [
+    RigidBodyType::Dynamic,
+    RigidBodyType::Fixed,
+    RigidBodyType::KinematicPositionBased,
+    RigidBodyType::KinematicVelocityBased,
+];
+
+fn random_shape(rng: &mut Rng) -> ColliderBuilder {
+    match rng.below(3) {
+        0 => ColliderBuilder::ball(rng.f(0.2, 1.0)),
+        1 => ColliderBuilder::cuboid(rng.f(0.1, 1.0), rng.f(0.1, 1.0), rng.f(0.1, 1.0)),
+        _ => ColliderBuilder::capsule_y(rng.f(0.1, 0.8), rng.f(0.1, 0.5)),
+    }
+}
+
+fn random_groups(rng: &mut Rng) -> InteractionGroups {
+    if rng.below(3) == 0 {
+        InteractionGroups::new(
+            Group::from_bits_truncate(1 << rng.below(3)),
+            Group::from_bits_truncate(rng.below(8) as u32),
+        )
+    } else {
+        InteractionGroups::all()
+    }
+}
+
+fn add_body(sim: &mut Sim, rng: &mut Rng) {
+    let t = TYPES[rng.below(4)];
+    let pos = vector![rng.f(-6.0, 6.0), rng.f(0.0, 8.0), rng.f(-6.0, 6.0)];
+    let rb = sim
+        .bodies
+        .insert(RigidBodyBuilder::new(t).translation(pos).linvel(vector![
+            rng.f(-2.0, 2.0),
+            rng.f(-2.0, 2.0),
+            rng.f(-2.0, 2.0)
+        ]));
+    for _ in 0..1 + rng.below(2) {
+        let mut b = random_shape(rng)
+            .translation(vector![
+                rng.f(-0.5, 0.5),
+                rng.f(-0.5, 0.5),
+                rng.f(-0.5, 0.5)
+            ])
+            .collision_groups(random_groups(rng));
+        if rng.below(5) == 0 {
+            b = b.active_collision_types(ActiveCollisionTypes::all());
+        }
+        if rng.below(8) == 0 {
+            b = b.sensor(true);
+        }
+        sim.colliders.insert_with_parent(b, rb, &mut sim.bodies);
+    }
+}
+
+fn new_sim(rng: &mut Rng, n: usize) -> Sim {
+    let mut sim = Sim {
+        bodies: RigidBodySet::new(),
+        colliders: ColliderSet::new(),
+        islands: IslandManager::new(),
+        narrow: NarrowPhase::new(),
+        pipeline: PhysicsPipeline::new(),
+        joints: ImpulseJointSet::new(),
+        multibody: MultibodyJointSet::new(),
+        ccd: CCDSolver::new(),
+        params: IntegrationParameters::default(),
+    };
+    sim.colliders
+        .insert(ColliderBuilder::cuboid(20.0, 0.2, 20.0));
+    for _ in 0..n {
+        if rng.below(6) == 0 {
+            // Parentless (fixed) collider.
+            let b = random_shape(rng).translation(vector![
+                rng.f(-6.0, 6.0),
+                rng.f(0.0, 6.0),
+                rng.f(-6.0, 6.0)
+            ]);
+            sim.colliders.insert(b);
+        } else {
+            add_body(&mut sim, rng);
+        }
+    }
+    sim
+}
+
+fn random_edit(sim: &mut Sim, rng: &mut Rng) {
+    let bodies: Vec<RigidBodyHandle> = sim.bodies.iter().map(|(h, _)| h).collect();
+    let colliders: Vec<ColliderHandle> = sim.colliders.iter().map(|(h, _)| h).collect();
+    if bodies.is_empty() || colliders.is_empty() {
+        add_body(sim, rng);
+        return;
+    }
+    let b = bodies[rng.below(bodies.len())];
+    let c = colliders[rng.below(colliders.len())];
+    match rng.below(10) {
+        0 => {
+            sim.bodies.remove(
+                b,
+                &mut sim.islands,
+                &mut sim.colliders,
+                &mut sim.joints,
+                &mut sim.multibody,
+                true,
+            );
+        }
+        1 => add_body(sim, rng),
+        2 => {
+            // Remove then add in the same step: the new collider reuses the handle index.
+            sim.colliders
+                .remove(c, &mut sim.islands, &mut sim.bodies, true);
+            let parent = bodies[rng.below(bodies.len())];
+            if sim.bodies.contains(parent) {
+                sim.colliders
+                    .insert_with_parent(random_shape(rng), parent, &mut sim.bodies);
+            }
+        }
+        3 => sim.bodies[b].set_body_type(TYPES[rng.below(4)], true),
+        4 => {
+            let parent = if rng.below(4) == 0 { None } else { Some(b) };
+            sim.colliders.set_parent(c, parent, &mut sim.bodies);
+        }
+        5 => {
+            let g = random_groups(rng);
+            sim.colliders[c].set_collision_groups(g);
+        }
+        6 => {
+            let on = !sim.colliders[c].is_enabled();
+            sim.colliders[c].set_enabled(on);
+        }
+        7 => {
+            let far = vector![rng.f(-50.0, 50.0), rng.f(0.0, 20.0), rng.f(-50.0, 50.0)];
+            sim.bodies[b].set_translation(far, true);
+        }
+        8 => {
+            let t = ActiveCollisionTypes::from_bits_truncate(rng.next() as u16);
+            sim.colliders[c].set_active_collision_types(t);
+        }
+        _ => {
+            let v = vector![rng.f(-5.0, 5.0), rng.f(-5.0, 5.0), rng.f(-5.0, 5.0)];
+            sim.bodies[b].set_linvel(v, true);
+        }
+    }
+}
+
+fn step(sim: &mut Sim, bp: &mut dyn BroadPhase) {
+    sim.pipeline.step(
+        &vector![0.0, -9.81, 0.0],
+        &sim.params,
+        &mut sim.islands,
+        bp,
+        &mut sim.narrow,
+        &mut sim.bodies,
+        &mut sim.colliders,
+        &mut sim.joints,
+        &mut sim.multibody,
+        &mut sim.ccd,
+        &(),
+        &(),
+    );
+}
+
+/// Runs a random world with random edits; returns the event log and the checker.
+fn run(
+    seed: u64,
+    bodies: usize,
+    steps: usize,
+    edits: usize,
+    config: CanopyBroadPhaseConfig,
+) -> Checked {
+    let mut rng = Rng(seed | 1);
+    let mut sim = new_sim(&mut rng, bodies);
+    let mut bp = Checked::new(config);
+    for _ in 0..steps {
+        for _ in 0..rng.below(edits + 1) {
+            random_edit(&mut sim, &mut rng);
+        }
+        step(&mut sim, &mut bp);
+    }
+    // Every live pair reached the narrow phase.
+    for (a, b) in bp.inner.pairs() {
+        if sim.narrow.contact_pair(a, b).is_none() && sim.narrow.intersection_pair(a, b).is_none() {
+            bp.violations
+                .push(format!("live pair {a:?} {b:?} unknown to the narrow phase"));
+        }
+    }
+    bp
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    #[test]
+    fn contract_holds_under_random_edits(seed in any::<u64>(), parallel in any::<bool>(), margin in 0.0f32..0.5) {
+        let config = CanopyBroadPhaseConfig { margin, parallel, ..Default::default() };
+        let bp = run(seed, 60, 40, 4, config);
+        prop_assert!(bp.violations.is_empty(), "{:#?}", &bp.violations[..bp.violations.len().min(10)]);
+        prop_assert!(bp.checked_pairs > 0, "the world produced no pair to check");
+    }
+}
+
+#[test]
+fn rebuild_heavy_policy_keeps_the_contract() {
+    // Tiny pending and dead limits force rebuilds nearly every step.
+    let mut config = CanopyBroadPhaseConfig::default();
+    config.rebuild.min_pending = 0;
+    config.rebuild.pending_fraction = 0.0;
+    config.rebuild.max_dead_fraction = 0.0;
+    config.rebuild.max_cost_growth = 1.0;
+    for seed in 1..6 {
+        let bp = run(seed * 7919, 80, 40, 6, config);
+        assert!(
+            bp.violations.is_empty(),
+            "{:#?}",
+            &bp.violations[..bp.violations.len().min(10)]
+        );
+        assert!(bp.inner.stats().rebuilds > 40);
+    }
+}
+
+#[test]
+fn events_do_not_depend_on_thread_count() {
+    let pool = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    for seed in [3u64, 99, 12345] {
+        let config = CanopyBroadPhaseConfig::default();
+        let one = pool(1).install(|| run(seed, 300, 30, 6, config));
+        let two = pool(2).install(|| run(seed, 300, 30, 6, config));
+        assert!(
+            one.log.len() > 100,
+            "too few events to compare: {}",
+            one.log.len()
+        );
+        assert_eq!(one.log, two.log);
+    }
+}
+
+#[test]
+fn invalid_boxes_are_skipped_counted_and_come_back() {
+    let mut rng = Rng(77);
+    let mut sim = new_sim(&mut rng, 0);
+    let ball = sim
+        .colliders
+        .insert(ColliderBuilder::ball(0.5).translation(vector![0.0, 0.5, 0.0]));
+    let body = sim
+        .bodies
+        .insert(RigidBodyBuilder::dynamic().translation(vector![0.0, 1.2, 0.0]));
+    let other = sim
+        .colliders
+        .insert_with_parent(ColliderBuilder::ball(0.5), body, &mut sim.bodies);
+    let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
+    step(&mut sim, &mut bp);
+    assert!(bp.inner.contains_pair(ball, other));
+    for bad in [f32::NAN, f32::INFINITY, -f32::INFINITY] {
+        sim.colliders[ball].set_translation(vector![bad, 0.5, 0.0]);
+        step(&mut sim, &mut bp);
+        assert_eq!(bp.inner.stats().invalid, 1);
+        assert!(
+            !bp.inner.contains_pair(ball, other),
+            "pairs of an invalid collider are deleted"
+        );
+        assert!(bp.inner.fat_aabb(ball).is_none());
+        sim.colliders[ball].set_translation(vector![0.0, 0.5, 0.0]);
+        sim.bodies[body].set_translation(vector![0.0, 1.2, 0.0], true);
+        step(&mut sim, &mut bp);
+        assert_eq!(bp.inner.stats().invalid, 0);
+        assert!(
+            bp.inner.contains_pair(ball, other),
+            "the collider comes back"
+        );
+    }
+    // Removing an invalid collider keeps the count right.
+    sim.colliders[ball].set_translation(vector![f32::NAN, 0.0, 0.0]);
+    step(&mut sim, &mut bp);
+    sim.colliders
+        .remove(ball, &mut sim.islands, &mut sim.bodies, true);
+    step(&mut sim, &mut bp);
+    assert_eq!(bp.inner.stats().invalid, 0);
+    assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+}
+
+#[test]
+fn huge_coordinates_do_not_panic() {
+    let mut rng = Rng(5);
+    let mut sim = new_sim(&mut rng, 10);
+    let far = sim
+        .colliders
+        .insert(ColliderBuilder::cuboid(1.0, 1.0, 1.0).translation(vector![1.0e30, 0.0, 0.0]));
+    let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
+    for _ in 0..5 {
+        step(&mut sim, &mut bp);
+    }
+    assert!(bp.inner.fat_aabb(far).is_some());
+    assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+}
