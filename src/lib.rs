@@ -4,6 +4,9 @@
 //! engine. This root crate re-exports the workspace crates:
 //!
 //! * [`core`] (`canopy-core`): the BVH: builders, refit, queries, pair finding.
+//! * [`rapier`] (`canopy-rapier`): `CanopyBroadPhase`, a drop-in `rapier3d` broadphase.
+//! * [`scenes`] (`canopy-scenes`): the standard scenes and the measuring harness used by the
+//!   examples, tests and benchmarks.
 //!
 //! ```
 //! use canopy::core::{Aabb, Bvh, BuildOptions};
@@ -15,3 +18,6 @@
 #![deny(missing_docs)]
 
 pub use canopy_core as core;
+pub use canopy_rapier as rapier;
+pub use canopy_scenes as scenes;
+pub use rapier3d;
