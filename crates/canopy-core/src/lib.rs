@@ -48,6 +48,7 @@ pub use bvh::{Bvh, Node, PrimBounds};
 pub use error::{BvhError, ValidationError};
 pub use query::nearest::NearestHit;
 pub use query::overlap::OverlapIter;
+pub use query::pairs::PairMarks;
 pub use query::ray::RayHit;
 pub use ray::Ray;
 pub use stats::BvhStats;

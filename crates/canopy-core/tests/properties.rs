@@ -140,6 +140,50 @@ proptest! {
     }
 
     #[test]
+    fn marked_pairs_match_brute_force(
+        a in box_set(150),
+        b in box_set(150),
+        oa in options(),
+        ob in options(),
+        seed_a in any::<u64>(),
+        seed_b in any::<u64>(),
+        density in 0u64..4,
+    ) {
+        // Mark about density/4 of the primitives (0: none, 3: three in four).
+        let mark = |seed: u64, i: u32| (seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)).rotate_left(17) % 4 < density;
+        let (ta, tb) = (build_checked(&a, oa), build_checked(&b, ob));
+        let (ma, mb) = (ta.marks(|i| mark(seed_a, i)), tb.marks(|i| mark(seed_b, i)));
+        let expect_self: Vec<(u32, u32)> = brute_self_pairs(&a)
+            .into_iter()
+            .filter(|&(x, y)| mark(seed_a, x) || mark(seed_a, y))
+            .collect();
+        let mut got = Vec::new();
+        ta.self_pairs_marked(&ma, |x, y| got.push((x, y)));
+        prop_assert_eq!(sorted(got), expect_self.clone());
+        prop_assert_eq!(sorted(ta.par_self_pairs_marked(&ma)), expect_self);
+
+        let mut expect = Vec::new();
+        for (i, x) in a.iter().enumerate() {
+            for (j, y) in b.iter().enumerate() {
+                if x.intersects(y) && (mark(seed_a, i as u32) || mark(seed_b, j as u32)) {
+                    expect.push((i as u32, j as u32));
+                }
+            }
+        }
+        let mut got = Vec::new();
+        ta.pairs_with_marked(&ma, &tb, &mb, |x, y| got.push((x, y)));
+        prop_assert_eq!(sorted(got), expect.clone());
+        prop_assert_eq!(sorted(ta.par_pairs_with_marked(&ma, &tb, &mb)), expect);
+
+        // Marks of another tree count as "all marked": never a missed pair.
+        let all = sorted(ta.par_self_pairs());
+        prop_assert_eq!(sorted(ta.par_self_pairs_marked(&tb.marks(|_| false))).len() <= all.len(), true);
+        if a.len() != b.len() {
+            prop_assert_eq!(sorted(ta.par_self_pairs_marked(&tb.marks(|_| false))), all);
+        }
+    }
+
+    #[test]
     fn overlap_and_point_queries_match_brute_force(
         boxes in box_set(200),
         opts in options(),

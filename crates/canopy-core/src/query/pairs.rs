@@ -7,6 +7,11 @@
 //! nodes, when their boxes overlap, expand the larger one. The parallel versions first expand
 //! the root task breadth-first into a fixed number of independent tasks, run those on rayon, and
 //! concatenate the results in task order.
+//!
+//! The `_marked` variants report only pairs with at least one *marked* primitive (a broadphase
+//! marks the proxies that moved). [`PairMarks`] summarises the marks per node, so whole
+//! subtrees without a marked primitive are skipped: one pass finds every new pair of every
+//! moved proxy, cheaper than one query per proxy once many moved.
 
 use crate::aabb::overlaps;
 use crate::bvh::{Bvh, Node};
@@ -31,6 +36,53 @@ fn half_area(n: &Node) -> f32 {
     d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
 }
 
+/// Which primitives a marked pair query is about, summarised per node: made by
+/// [`Bvh::marks`] for one tree, valid for that tree until it is rebuilt (refit keeps it valid).
+/// Marks made for another tree are treated as "everything marked": never a missed pair.
+#[derive(Clone, Debug, Default)]
+pub struct PairMarks {
+    nodes: Vec<bool>,
+    slots: Vec<bool>,
+    any: bool,
+}
+
+impl PairMarks {
+    /// `true` when at least one primitive is marked.
+    pub fn any(&self) -> bool {
+        self.any
+    }
+}
+
+/// Node and primitive-slot filters of a pair walk.
+trait Mask: Sync {
+    fn node(&self, i: u32) -> bool;
+    fn slot(&self, s: usize) -> bool;
+}
+
+/// Everything marked: the plain pair queries.
+struct All;
+impl Mask for All {
+    #[inline(always)]
+    fn node(&self, _: u32) -> bool {
+        true
+    }
+    #[inline(always)]
+    fn slot(&self, _: usize) -> bool {
+        true
+    }
+}
+
+impl Mask for PairMarks {
+    #[inline(always)]
+    fn node(&self, i: u32) -> bool {
+        self.nodes[i as usize]
+    }
+    #[inline(always)]
+    fn slot(&self, s: usize) -> bool {
+        self.slots[s]
+    }
+}
+
 /// A pair-walk task: node `a` of the first tree against node `b` of the second. In a self walk
 /// (`SELF = true`, both trees the same) `a == b` means "the subtree against itself".
 type Task = (u32, u32);
@@ -38,18 +90,30 @@ type Task = (u32, u32);
 /// Expands one task into the tasks it generates, or returns `false` when it is a leaf task
 /// (`a` and `b` leaves, or a leaf against itself) to be handled by `leaf_task`.
 #[inline(always)]
-fn expand<const SELF: bool>(t1: &Bvh, t2: &Bvh, (a, b): Task, mut push: impl FnMut(Task)) -> bool {
+fn expand<const SELF: bool, M1: Mask, M2: Mask>(
+    t1: &Bvh,
+    m1: &M1,
+    t2: &Bvh,
+    m2: &M2,
+    (a, b): Task,
+    mut push: impl FnMut(Task),
+) -> bool {
     let na = &t1.nodes[a as usize];
     if SELF && a == b {
         if na.is_leaf() {
             return false;
         }
         let (l, r) = (a + 1, na.right());
-        if nodes_overlap(&t1.nodes[l as usize], &t1.nodes[r as usize]) {
+        let (ml, mr) = (m1.node(l), m1.node(r));
+        if (ml || mr) && nodes_overlap(&t1.nodes[l as usize], &t1.nodes[r as usize]) {
             push((l, r));
         }
-        push((r, r));
-        push((l, l));
+        if mr {
+            push((r, r));
+        }
+        if ml {
+            push((l, l));
+        }
         return true;
     }
     let nb = &t2.nodes[b as usize];
@@ -60,14 +124,16 @@ fn expand<const SELF: bool>(t1: &Bvh, t2: &Bvh, (a, b): Task, mut push: impl FnM
         (false, false) => half_area(na) >= half_area(nb),
     };
     if split_a {
+        let mb = m2.node(b);
         for c in [na.right(), a + 1] {
-            if nodes_overlap(&t1.nodes[c as usize], nb) {
+            if (mb || m1.node(c)) && nodes_overlap(&t1.nodes[c as usize], nb) {
                 push((c, b));
             }
         }
     } else {
+        let ma = m1.node(a);
         for c in [nb.right(), b + 1] {
-            if nodes_overlap(na, &t2.nodes[c as usize]) {
+            if (ma || m2.node(c)) && nodes_overlap(na, &t2.nodes[c as usize]) {
                 push((a, c));
             }
         }
@@ -77,15 +143,23 @@ fn expand<const SELF: bool>(t1: &Bvh, t2: &Bvh, (a, b): Task, mut push: impl FnM
 
 /// Reports the overlapping primitive pairs of a leaf task.
 #[inline(always)]
-fn leaf_task<const SELF: bool>(t1: &Bvh, t2: &Bvh, (a, b): Task, f: &mut impl FnMut(u32, u32)) {
+fn leaf_task<const SELF: bool, M1: Mask, M2: Mask>(
+    t1: &Bvh,
+    m1: &M1,
+    t2: &Bvh,
+    m2: &M2,
+    (a, b): Task,
+    f: &mut impl FnMut(u32, u32),
+) {
     let na = &t1.nodes[a as usize];
     if SELF && a == b {
         let r = na.leaf_range();
         for s in r.clone() {
             let ps = &t1.prim_bounds[s];
+            let ms = m1.slot(s);
             for u in s + 1..r.end {
                 let pu = &t1.prim_bounds[u];
-                if overlaps(&ps.min, &ps.max, &pu.min, &pu.max) {
+                if (ms || m1.slot(u)) && overlaps(&ps.min, &ps.max, &pu.min, &pu.max) {
                     let (x, y) = (t1.prim_indices[s], t1.prim_indices[u]);
                     f(x.min(y), x.max(y));
                 }
@@ -99,9 +173,10 @@ fn leaf_task<const SELF: bool>(t1: &Bvh, t2: &Bvh, (a, b): Task, f: &mut impl Fn
         if !overlaps(&ps.min, &ps.max, &nb.min, &nb.max) {
             continue;
         }
+        let ms = m1.slot(s);
         for u in nb.leaf_range() {
             let pu = &t2.prim_bounds[u];
-            if overlaps(&ps.min, &ps.max, &pu.min, &pu.max) {
+            if (ms || m2.slot(u)) && overlaps(&ps.min, &ps.max, &pu.min, &pu.max) {
                 let (x, y) = (t1.prim_indices[s], t2.prim_indices[u]);
                 if SELF {
                     f(x.min(y), x.max(y));
@@ -113,19 +188,33 @@ fn leaf_task<const SELF: bool>(t1: &Bvh, t2: &Bvh, (a, b): Task, f: &mut impl Fn
     }
 }
 
-fn walk<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, f: &mut impl FnMut(u32, u32)) {
+fn walk<const SELF: bool, M1: Mask, M2: Mask>(
+    t1: &Bvh,
+    m1: &M1,
+    t2: &Bvh,
+    m2: &M2,
+    start: Task,
+    f: &mut impl FnMut(u32, u32),
+) {
     let mut stack: Vec<Task> = Vec::with_capacity(128);
     stack.push(start);
     while let Some(t) = stack.pop() {
-        if !expand::<SELF>(t1, t2, t, |c| stack.push(c)) {
-            leaf_task::<SELF>(t1, t2, t, f);
+        if !expand::<SELF, M1, M2>(t1, m1, t2, m2, t, |c| stack.push(c)) {
+            leaf_task::<SELF, M1, M2>(t1, m1, t2, m2, t, f);
         }
     }
 }
 
 /// Breadth-first expansion of `start` into at least `target` tasks (fewer when the trees run
 /// out of nodes). Depends only on the trees.
-fn split_tasks<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, target: usize) -> Vec<Task> {
+fn split_tasks<const SELF: bool, M1: Mask, M2: Mask>(
+    t1: &Bvh,
+    m1: &M1,
+    t2: &Bvh,
+    m2: &M2,
+    start: Task,
+    target: usize,
+) -> Vec<Task> {
     let mut tasks = vec![start];
     loop {
         if tasks.len() >= target {
@@ -134,7 +223,7 @@ fn split_tasks<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, target: usize)
         let mut next = Vec::with_capacity(tasks.len() * 3);
         let mut grew = false;
         for &t in &tasks {
-            if expand::<SELF>(t1, t2, t, |c| next.push(c)) {
+            if expand::<SELF, M1, M2>(t1, m1, t2, m2, t, |c| next.push(c)) {
                 grew = true;
             } else {
                 next.push(t);
@@ -147,13 +236,19 @@ fn split_tasks<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, target: usize)
     }
 }
 
-fn par_walk<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task) -> Vec<(u32, u32)> {
-    let tasks = split_tasks::<SELF>(t1, t2, start, PARALLEL_TASKS);
+fn par_walk<const SELF: bool, M1: Mask, M2: Mask>(
+    t1: &Bvh,
+    m1: &M1,
+    t2: &Bvh,
+    m2: &M2,
+    start: Task,
+) -> Vec<(u32, u32)> {
+    let tasks = split_tasks::<SELF, M1, M2>(t1, m1, t2, m2, start, PARALLEL_TASKS);
     let parts: Vec<Vec<(u32, u32)>> = tasks
         .par_iter()
         .map(|&t| {
             let mut v = Vec::new();
-            walk::<SELF>(t1, t2, t, &mut |a, b| v.push((a, b)));
+            walk::<SELF, M1, M2>(t1, m1, t2, m2, t, &mut |a, b| v.push((a, b)));
             v
         })
         .collect();
@@ -181,7 +276,7 @@ impl Bvh {
     /// ```
     pub fn self_pairs(&self, mut f: impl FnMut(u32, u32)) {
         if !self.nodes.is_empty() {
-            walk::<true>(self, self, (0, 0), &mut f);
+            walk::<true, All, All>(self, &All, self, &All, (0, 0), &mut f);
         }
     }
 
@@ -206,7 +301,7 @@ impl Bvh {
         if self.nodes.is_empty() {
             return Vec::new();
         }
-        par_walk::<true>(self, self, (0, 0))
+        par_walk::<true, All, All>(self, &All, self, &All, (0, 0))
     }
 
     /// Calls `f(a, b)` for every primitive `a` of `self` and `b` of `other` whose boxes
@@ -224,7 +319,7 @@ impl Bvh {
     /// ```
     pub fn pairs_with(&self, other: &Bvh, mut f: impl FnMut(u32, u32)) {
         if let Some(start) = self.root_task(other) {
-            walk::<false>(self, other, start, &mut f);
+            walk::<false, All, All>(self, &All, other, &All, start, &mut f);
         }
     }
 
@@ -232,8 +327,108 @@ impl Bvh {
     /// parallel; the order depends only on the two trees.
     pub fn par_pairs_with(&self, other: &Bvh) -> Vec<(u32, u32)> {
         match self.root_task(other) {
-            Some(start) => par_walk::<false>(self, other, start),
+            Some(start) => par_walk::<false, All, All>(self, &All, other, &All, start),
             None => Vec::new(),
+        }
+    }
+
+    /// Marks primitives for the `_marked` pair queries: `marked(i)` says whether primitive `i`
+    /// takes part. One pass over the primitives and one over the nodes.
+    ///
+    /// ```
+    /// use canopy_core::{Aabb, Bvh, BuildOptions};
+    /// let boxes: Vec<Aabb> = (0..8).map(|i| Aabb::from_arrays([i as f32; 3], [i as f32 + 1.0; 3])).collect();
+    /// let bvh = Bvh::build(&boxes, BuildOptions::default())?;
+    /// let marks = bvh.marks(|i| i == 3);
+    /// let mut pairs = Vec::new();
+    /// bvh.self_pairs_marked(&marks, |a, b| pairs.push((a, b)));
+    /// pairs.sort();
+    /// assert_eq!(pairs, [(2, 3), (3, 4)]);
+    /// # Ok::<(), canopy_core::BvhError>(())
+    /// ```
+    pub fn marks(&self, marked: impl Fn(u32) -> bool) -> PairMarks {
+        let slots: Vec<bool> = self.prim_indices.iter().map(|&p| marked(p)).collect();
+        let mut nodes = vec![false; self.nodes.len()];
+        for i in (0..self.nodes.len()).rev() {
+            let n = &self.nodes[i];
+            nodes[i] = if n.is_leaf() {
+                slots[n.leaf_range()].iter().any(|&m| m)
+            } else {
+                nodes[i + 1] || nodes[n.right() as usize]
+            };
+        }
+        let any = nodes.first().copied().unwrap_or(false);
+        PairMarks { nodes, slots, any }
+    }
+
+    /// `marks` when it was made for this tree, else `None` (callers then treat all as marked).
+    fn checked_marks<'a>(&self, marks: &'a PairMarks) -> Option<&'a PairMarks> {
+        (marks.nodes.len() == self.nodes.len() && marks.slots.len() == self.len()).then_some(marks)
+    }
+
+    /// [`Bvh::self_pairs`] restricted to pairs with at least one marked primitive.
+    pub fn self_pairs_marked(&self, marks: &PairMarks, mut f: impl FnMut(u32, u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        match self.checked_marks(marks) {
+            Some(m) if m.any => walk::<true, _, _>(self, m, self, m, (0, 0), &mut f),
+            Some(_) => {}
+            None => self.self_pairs(f),
+        }
+    }
+
+    /// [`Bvh::par_self_pairs`] restricted to pairs with at least one marked primitive; the
+    /// order depends only on the tree and the marks.
+    pub fn par_self_pairs_marked(&self, marks: &PairMarks) -> Vec<(u32, u32)> {
+        if self.nodes.is_empty() {
+            return Vec::new();
+        }
+        match self.checked_marks(marks) {
+            Some(m) if m.any => par_walk::<true, _, _>(self, m, self, m, (0, 0)),
+            Some(_) => Vec::new(),
+            None => self.par_self_pairs(),
+        }
+    }
+
+    /// [`Bvh::pairs_with`] restricted to pairs where the primitive of `self` is marked in
+    /// `marks` or the primitive of `other` is marked in `other_marks`.
+    pub fn pairs_with_marked(
+        &self,
+        marks: &PairMarks,
+        other: &Bvh,
+        other_marks: &PairMarks,
+        mut f: impl FnMut(u32, u32),
+    ) {
+        let Some(start) = self.root_task(other) else {
+            return;
+        };
+        match (self.checked_marks(marks), other.checked_marks(other_marks)) {
+            (Some(m1), Some(m2)) if m1.any || m2.any => {
+                walk::<false, _, _>(self, m1, other, m2, start, &mut f)
+            }
+            (Some(_), Some(_)) => {}
+            _ => self.pairs_with(other, f),
+        }
+    }
+
+    /// [`Bvh::pairs_with_marked`], found in parallel; the order depends only on the trees and
+    /// the marks.
+    pub fn par_pairs_with_marked(
+        &self,
+        marks: &PairMarks,
+        other: &Bvh,
+        other_marks: &PairMarks,
+    ) -> Vec<(u32, u32)> {
+        let Some(start) = self.root_task(other) else {
+            return Vec::new();
+        };
+        match (self.checked_marks(marks), other.checked_marks(other_marks)) {
+            (Some(m1), Some(m2)) if m1.any || m2.any => {
+                par_walk::<false, _, _>(self, m1, other, m2, start)
+            }
+            (Some(_), Some(_)) => Vec::new(),
+            _ => self.par_pairs_with(other),
         }
     }
 
