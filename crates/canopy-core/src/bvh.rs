@@ -107,6 +107,8 @@ pub struct Bvh {
     pub(crate) nodes: Vec<Node>,
     pub(crate) prim_indices: Vec<u32>,
     pub(crate) prim_bounds: Vec<PrimBounds>,
+    /// Inverse of `prim_indices`: the slot of each primitive.
+    pub(crate) slot_of: Vec<u32>,
 }
 
 impl Bvh {

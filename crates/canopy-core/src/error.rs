@@ -25,6 +25,14 @@ pub enum BvhError {
         /// Number of boxes given.
         got: usize,
     },
+    /// A primitive index that the tree does not hold.
+    #[error("primitive {index} is not in the tree (it holds {len})")]
+    UnknownPrimitive {
+        /// The index given.
+        index: u32,
+        /// Primitive count of the tree.
+        len: usize,
+    },
     /// A build option is out of range.
     #[error("invalid build options: {0}")]
     InvalidOptions(&'static str),

@@ -45,6 +45,46 @@ impl Bvh {
         Ok(())
     }
 
+    /// Replaces the boxes of the primitives listed in `changes` (`(primitive, new box)`) and
+    /// refits every node: the cheap path when only some primitives moved (one pass over the
+    /// changes and one over the nodes, none over the other primitives).
+    ///
+    /// # Errors
+    /// [`BvhError::UnknownPrimitive`] for an index `>= self.len()` and
+    /// [`BvhError::InvalidAabb`] (with the position in `changes`) for an invalid box. On error
+    /// the tree is unchanged.
+    ///
+    /// ```
+    /// use canopy_core::{Aabb, Bvh, BuildOptions};
+    /// let mut boxes = vec![Aabb::from_arrays([0.0; 3], [1.0; 3]); 10];
+    /// let mut bvh = Bvh::build(&boxes, BuildOptions::default())?;
+    /// boxes[7] = Aabb::from_arrays([5.0; 3], [6.0; 3]);
+    /// bvh.refit_primitives(&[(7, boxes[7])])?;
+    /// assert!(bvh.validate_with_primitives(&boxes).is_ok());
+    /// # Ok::<(), canopy_core::BvhError>(())
+    /// ```
+    pub fn refit_primitives(&mut self, changes: &[(u32, Aabb)]) -> Result<(), BvhError> {
+        for (i, (prim, aabb)) in changes.iter().enumerate() {
+            if *prim as usize >= self.len() {
+                return Err(BvhError::UnknownPrimitive {
+                    index: *prim,
+                    len: self.len(),
+                });
+            }
+            if !aabb.is_valid() {
+                return Err(BvhError::InvalidAabb { index: i });
+            }
+        }
+        if changes.is_empty() {
+            return Ok(());
+        }
+        for (prim, aabb) in changes {
+            self.prim_bounds[self.slot_of[*prim as usize] as usize] = PrimBounds::from_aabb(aabb);
+        }
+        self.refit_nodes();
+        Ok(())
+    }
+
     /// Recomputes every node box from the stored primitive boxes.
     pub(crate) fn refit_nodes(&mut self) {
         for i in (0..self.nodes.len()).rev() {

@@ -52,6 +52,10 @@ impl Bvh {
         for (slot, &p) in self.prim_indices.iter().enumerate() {
             ensure!((p as usize) < n, "slot {slot}: primitive {p} out of range");
             ensure!(!seen[p as usize], "primitive {p} appears twice");
+            ensure!(
+                self.slot_of.get(p as usize) == Some(&(slot as u32)),
+                "primitive {p}: slot map does not point at slot {slot}"
+            );
             seen[p as usize] = true;
             let b = &self.prim_bounds[slot];
             ensure!(

@@ -81,6 +81,10 @@ fn build_checked(boxes: &[Aabb], opts: BuildOptions) -> Bvh {
     bvh
 }
 
+fn is_unknown_primitive(e: &Option<BvhError>) -> bool {
+    matches!(e, Some(BvhError::UnknownPrimitive { .. }))
+}
+
 fn brute_self_pairs(boxes: &[Aabb]) -> Vec<(u32, u32)> {
     let mut v = Vec::new();
     for i in 0..boxes.len() {
@@ -289,6 +293,44 @@ proptest! {
             .map(|(b, (o, h))| Aabb::from_center_half_extents(b.center() + Vector3::from(*o), Vector3::from(*h)))
             .collect();
         bvh.refit(&moved).expect("valid boxes refit");
+        bvh.validate_with_primitives(&moved).expect("refit tree is valid");
+        let mut got = Vec::new();
+        bvh.self_pairs(|a, b| got.push((a, b)));
+        prop_assert_eq!(sorted(got), brute_self_pairs(&moved));
+    }
+
+    #[test]
+    fn partial_refit_keeps_queries_exact(
+        boxes in box_set(150),
+        opts in options(),
+        moves in prop::collection::vec((0usize..150, prop::array::uniform3(-20.0f32..20.0), prop::array::uniform3(0.0f32..3.0)), 0..60),
+        bad in prop::option::of(0usize..60),
+    ) {
+        let mut bvh = build_checked(&boxes, opts);
+        let mut moved = boxes.clone();
+        let mut changes = Vec::new();
+        for &(i, o, h) in &moves {
+            if boxes.is_empty() {
+                break;
+            }
+            let i = i % boxes.len();
+            let b = Aabb::from_center_half_extents(boxes[i].center() + Vector3::from(o), Vector3::from(h));
+            moved[i] = b;
+            changes.push((i as u32, b));
+        }
+        // A bad entry anywhere leaves the tree unchanged.
+        if let Some(k) = bad.filter(|&k| k < changes.len()) {
+            let mut broken = changes.clone();
+            broken[k].1.max.x = f32::NAN;
+            let before = bvh.clone();
+            prop_assert_eq!(bvh.refit_primitives(&broken), Err(BvhError::InvalidAabb { index: k }));
+            prop_assert_eq!(bvh.nodes(), before.nodes());
+            prop_assert_eq!(bvh.primitive_bounds(), before.primitive_bounds());
+            let unknown = [(boxes.len() as u32, Aabb::from_point(Point3::origin()))];
+            let unknown_err = bvh.refit_primitives(&unknown).err();
+            prop_assert!(is_unknown_primitive(&unknown_err));
+        }
+        bvh.refit_primitives(&changes).expect("valid changes refit");
         bvh.validate_with_primitives(&moved).expect("refit tree is valid");
         let mut got = Vec::new();
         bvh.self_pairs(|a, b| got.push((a, b)));

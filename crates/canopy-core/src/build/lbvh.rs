@@ -102,6 +102,7 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
         nodes,
         prim_indices,
         prim_bounds,
+        slot_of: Vec::new(),
     }
 }
 

@@ -110,10 +110,15 @@ pub(crate) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, BvhEr
     if aabbs.is_empty() {
         return Ok(Bvh::default());
     }
-    Ok(match options.builder {
+    let mut bvh = match options.builder {
         Builder::BinnedSah => binned_sah::build(aabbs, options),
         Builder::Lbvh => lbvh::build(aabbs, options),
-    })
+    };
+    bvh.slot_of = vec![0; bvh.prim_indices.len()];
+    for (slot, &p) in bvh.prim_indices.iter().enumerate() {
+        bvh.slot_of[p as usize] = slot as u32;
+    }
+    Ok(bvh)
 }
 
 /// Running min/max bounds on raw arrays, used by the builders.

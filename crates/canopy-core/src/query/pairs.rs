@@ -244,6 +244,14 @@ fn par_walk<const SELF: bool, M1: Mask, M2: Mask>(
     start: Task,
 ) -> Vec<(u32, u32)> {
     let tasks = split_tasks::<SELF, M1, M2>(t1, m1, t2, m2, start, PARALLEL_TASKS);
+    if rayon::current_num_threads() == 1 {
+        // Same tasks in the same order, without the cost of rayon's collection.
+        let mut out = Vec::new();
+        for &t in &tasks {
+            walk::<SELF, M1, M2>(t1, m1, t2, m2, t, &mut |a, b| out.push((a, b)));
+        }
+        return out;
+    }
     let parts: Vec<Vec<(u32, u32)>> = tasks
         .par_iter()
         .map(|&t| {
