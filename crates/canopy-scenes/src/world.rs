@@ -1,0 +1,221 @@
+//! [`World`]: a [`Scene`] plus all of Rapier's pipeline state, stepped with
+//! any broad-phase.
+
+use crate::scene::{HookCtx, Scene};
+use rapier3d::dynamics::{CCDSolver, IntegrationParameters, IslandManager, RigidBodySet};
+use rapier3d::geometry::{
+    BroadPhase, BroadPhasePairEvent, ColliderHandle, ColliderSet, NarrowPhase,
+};
+use rapier3d::pipeline::PhysicsPipeline;
+use std::ptr::NonNull;
+use std::time::{Duration, Instant};
+
+/// A scene plus all the Rapier pipeline state, stepped with any broadphase.
+///
+/// Every field is public, so callers can inspect or change anything between
+/// steps (for example compare `narrow_phase` contact pairs across two worlds
+/// stepped with different broad-phases).
+pub struct World<B: BroadPhase> {
+    /// The scene: sets, parameters, gravity and hook.
+    pub scene: Scene,
+    /// Rapier's island manager (active and sleeping bodies).
+    pub islands: IslandManager,
+    /// The broad-phase under test (Rapier's `BroadPhaseBvh`, canopy's, ...).
+    pub broad_phase: B,
+    /// Rapier's narrow-phase.
+    pub narrow_phase: NarrowPhase,
+    /// Rapier's physics pipeline, with its `counters` enabled.
+    pub pipeline: PhysicsPipeline,
+    /// Rapier's continuous-collision-detection solver.
+    pub ccd: CCDSolver,
+    steps: usize,
+    last_step: Duration,
+    last_broad_phase: Duration,
+    last_broad_phase_calls: usize,
+}
+
+impl<B: BroadPhase> World<B> {
+    /// Wraps `scene` with fresh pipeline state and `broad_phase` (which
+    /// should be empty: it will see every collider as new on the first step).
+    pub fn new(scene: Scene, broad_phase: B) -> Self {
+        let mut pipeline = PhysicsPipeline::new();
+        pipeline.counters.enable();
+        World {
+            scene,
+            islands: IslandManager::new(),
+            broad_phase,
+            narrow_phase: NarrowPhase::new(),
+            pipeline,
+            ccd: CCDSolver::new(),
+            steps: 0,
+            last_step: Duration::ZERO,
+            last_broad_phase: Duration::ZERO,
+            last_broad_phase_calls: 0,
+        }
+    }
+
+    /// Runs one step: the scene's hook (if any) with the index of this step,
+    /// then `PhysicsPipeline::step` with `&mut self.broad_phase`, no physics
+    /// hooks and no event handler.
+    pub fn step(&mut self) {
+        let Scene {
+            bodies,
+            colliders,
+            impulse_joints,
+            multibody_joints,
+            params,
+            gravity,
+            hook,
+            ..
+        } = &mut self.scene;
+
+        if let Some(hook) = hook.as_mut() {
+            hook(&mut HookCtx {
+                step: self.steps,
+                bodies,
+                colliders,
+                islands: &mut self.islands,
+                impulse_joints,
+                multibody_joints,
+            });
+        }
+
+        let mut timed = TimedBroadPhase::new(&mut self.broad_phase);
+        let start = Instant::now();
+        self.pipeline.step(
+            gravity,
+            params,
+            &mut self.islands,
+            &mut timed,
+            &mut self.narrow_phase,
+            bodies,
+            colliders,
+            impulse_joints,
+            multibody_joints,
+            &mut self.ccd,
+            &(),
+            &(),
+        );
+        self.last_step = start.elapsed();
+        self.last_broad_phase = timed.elapsed;
+        self.last_broad_phase_calls = timed.calls;
+        self.steps += 1;
+    }
+
+    /// Runs `n` steps.
+    pub fn step_n(&mut self, n: usize) {
+        for _ in 0..n {
+            self.step();
+        }
+    }
+
+    /// Number of steps run so far.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// Wall-clock milliseconds of the last `PhysicsPipeline::step` (the hook
+    /// excluded); 0 before the first step.
+    ///
+    /// Measured by `World` itself: Rapier's own `pipeline.counters` timers
+    /// only tick when rapier3d's `profiler` feature is enabled, which this
+    /// crate does not enable (they read 0 otherwise).
+    pub fn step_ms_last_step(&self) -> f64 {
+        self.last_step.as_secs_f64() * 1000.0
+    }
+
+    /// Wall-clock milliseconds spent in `BroadPhase::update` during the last
+    /// step, summed over its calls (Rapier calls it twice per step, once for
+    /// the user's changes and once after integrating the positions, plus once
+    /// per extra CCD substep); 0 before the first step.
+    ///
+    /// This is what Rapier's `counters.broad_phase_time_ms()` measures when
+    /// its `profiler` feature is on, but it works without it.
+    pub fn broad_phase_ms_last_step(&self) -> f64 {
+        self.last_broad_phase.as_secs_f64() * 1000.0
+    }
+
+    /// How many times `BroadPhase::update` ran during the last step.
+    pub fn broad_phase_calls_last_step(&self) -> usize {
+        self.last_broad_phase_calls
+    }
+
+    /// The integration parameters the scene is stepped with.
+    pub fn params(&self) -> &IntegrationParameters {
+        &self.scene.params
+    }
+
+    /// The rigid bodies.
+    pub fn bodies(&self) -> &RigidBodySet {
+        &self.scene.bodies
+    }
+
+    /// The colliders.
+    pub fn colliders(&self) -> &ColliderSet {
+        &self.scene.colliders
+    }
+
+    /// Gives the scene and the broad-phase back.
+    pub fn into_parts(self) -> (Scene, B) {
+        (self.scene, self.broad_phase)
+    }
+}
+
+/// Forwards to the broad-phase of a [`World`] and times every `update`.
+///
+/// Rapier takes the broad-phase as `&mut dyn BroadPhase`, and `BroadPhase`
+/// requires `'static`, so a wrapper holding `&mut B` is not allowed; this one
+/// holds a pointer instead. It only lives inside [`World::step`], where it is
+/// built from `&mut self.broad_phase` and dropped before that borrow ends.
+struct TimedBroadPhase<B: BroadPhase> {
+    inner: NonNull<B>,
+    elapsed: Duration,
+    calls: usize,
+}
+
+impl<B: BroadPhase> TimedBroadPhase<B> {
+    fn new(inner: &mut B) -> Self {
+        TimedBroadPhase {
+            inner: NonNull::from(inner),
+            elapsed: Duration::ZERO,
+            calls: 0,
+        }
+    }
+}
+
+// SAFETY: a `TimedBroadPhase<B>` stands for the `&mut B` it was built from,
+// which is `Send` and `Sync` because `B: BroadPhase` is `Send + Sync`.
+#[allow(unsafe_code)]
+unsafe impl<B: BroadPhase> Send for TimedBroadPhase<B> {}
+// SAFETY: as above.
+#[allow(unsafe_code)]
+unsafe impl<B: BroadPhase> Sync for TimedBroadPhase<B> {}
+
+impl<B: BroadPhase> BroadPhase for TimedBroadPhase<B> {
+    fn update(
+        &mut self,
+        params: &IntegrationParameters,
+        colliders: &ColliderSet,
+        bodies: &RigidBodySet,
+        modified_colliders: &[ColliderHandle],
+        removed_colliders: &[ColliderHandle],
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) {
+        // SAFETY: `inner` comes from a `&mut B` that outlives `self` (see
+        // `World::step`) and that nothing else uses while `self` exists;
+        // `&mut self` makes this the only access.
+        #[allow(unsafe_code)]
+        let inner = unsafe { self.inner.as_mut() };
+        let start = Instant::now();
+        inner.update(
+            params,
+            colliders,
+            bodies,
+            modified_colliders,
+            removed_colliders,
+            events,
+        );
+        self.elapsed += start.elapsed();
+        self.calls += 1;
+    }
+}
