@@ -11,23 +11,19 @@
 //! 3. Trees are refit or rebuilt (`proxy_tree.rs`).
 //! 4. Deletions: only pairs of moved proxies are checked; a pair goes when the fat boxes
 //!    separate or the filter now rejects it.
-//! 5. New pairs: each moved proxy queries the trees it may pair with (fixed colliders never
-//!    query the fixed tree unless some collider enables fixed-fixed contacts), in parallel,
-//!    merged in move-buffer order so the events do not depend on the thread count.
+//! 5. New pairs: moved proxies are marked in their tree, and one marked pair walk per pair of
+//!    trees that may pair (never fixed-fixed unless some collider enables it) finds every pair
+//!    with a moved proxy, skipping subtrees without one (parallel walks give the same order
+//!    with any thread count). Proxies added since the last rebuild query the trees instead.
 
 use crate::config::CanopyBroadPhaseConfig;
 use crate::filter::{FilterData, Mobility};
 use crate::pair_set::PairSet;
 use crate::proxy::{Loc, Proxy};
-use crate::proxy_tree::ProxyTree;
+use crate::proxy_tree::{ProxyTree, DEAD};
 use crate::stats::BroadPhaseStats;
-use canopy_core::Aabb;
+use canopy_core::{Aabb, PairMarks};
 use rapier3d::prelude::*;
-use rayon::prelude::*;
-
-/// Moved proxies are queried in chunks of this many; the chunking (not the thread count) fixes
-/// the order in which results are merged.
-const QUERY_CHUNK: usize = 64;
 
 /// A broadphase for Rapier built on canopy-core BVHs: fat boxes, one tree per mobility
 /// (fixed, kinematic, dynamic), a move buffer, per-proxy pair lists and pair filtering at the
@@ -171,14 +167,15 @@ impl CanopyBroadPhase {
 
     /// The box the narrow phase needs covered: Rapier's collision box (prediction distance),
     /// merged with the box at the soft-CCD predicted pose.
+    #[inline]
     fn collision_aabb(
         params: &IntegrationParameters,
         collider: &Collider,
-        bodies: &RigidBodySet,
+        parent: Option<&RigidBody>,
     ) -> Aabb {
         let prediction = params.prediction_distance();
         let mut aabb = collider.compute_collision_aabb(prediction / 2.0);
-        if let Some(rb) = collider.parent().and_then(|h| bodies.get(h)) {
+        if let Some(rb) = parent {
             let max_dist = rb.soft_ccd_prediction();
             if max_dist > 0.0 {
                 // Rapier clamps the predicted motion to `max_dist`; its exact helper is private,
@@ -204,6 +201,30 @@ impl CanopyBroadPhase {
         Aabb::new(aabb.mins, aabb.maxs)
     }
 
+    /// The fat box of an exact box: enlarged by the margin, and stretched along the parent's
+    /// linear velocity over `velocity_steps` steps.
+    #[inline]
+    fn fat_box(
+        velocity_steps: f32,
+        tight: &Aabb,
+        margin: f32,
+        params: &IntegrationParameters,
+        parent: Option<&RigidBody>,
+    ) -> Aabb {
+        let mut fat = tight.loosened(margin);
+        if let Some(rb) = parent {
+            let d = rb.linvel() * (params.dt * velocity_steps);
+            for i in 0..3 {
+                if d[i] < 0.0 {
+                    fat.min[i] += d[i];
+                } else {
+                    fat.max[i] += d[i];
+                }
+            }
+        }
+        fat
+    }
+
     /// Step 2 for one collider.
     #[allow(clippy::too_many_arguments)]
     fn examine(
@@ -216,24 +237,50 @@ impl CanopyBroadPhase {
         events: &mut Vec<BroadPhasePairEvent>,
     ) {
         let id = handle.into_raw_parts().0;
+        let velocity_steps = self.config.velocity_steps;
         let Some(collider) = colliders.get(handle) else {
             return;
         };
+        let parent = collider.parent().and_then(|h| bodies.get(h));
+        let enabled = collider.is_enabled();
+
+        // Fast path, the common case: a known, valid proxy whose filter inputs did not change.
+        // Either its exact box is still inside its fat box (nothing to do), or it gets a new
+        // fat box in place.
+        if let Some(Some(p)) = self.proxies.get_mut(id as usize) {
+            if enabled && p.handle == handle && p.is_valid() && p.filter.same_as(collider, parent) {
+                let tight = Self::collision_aabb(params, collider, parent);
+                if p.fat.contains(&tight) {
+                    return;
+                }
+                let fat = Self::fat_box(velocity_steps, &tight, margin, params, parent);
+                if fat.is_valid() {
+                    p.fat = fat;
+                    self.trees[p.mobility as usize].set_box(p);
+                    if !p.moved {
+                        p.moved = true;
+                        self.moved.push(id);
+                    }
+                    return;
+                }
+            }
+        }
+
         if let Some(Some(p)) = self.proxies.get(id as usize) {
             if p.handle != handle {
                 // A stale proxy under a reused index (its removal was not reported).
                 self.remove_proxy(id);
             }
         }
-        if !collider.is_enabled() {
+        if !enabled {
             // Disabled colliders also arrive in `removed`; make sure nothing is left.
             self.remove_proxy(id);
             return;
         }
-        let tight = Self::collision_aabb(params, collider, bodies);
-        let filter = FilterData::of(collider, bodies);
+        let tight = Self::collision_aabb(params, collider, parent);
+        let filter = FilterData::new(collider, parent);
         let mobility = Mobility::of(filter.body_type);
-        let fat = tight.loosened(margin);
+        let fat = Self::fat_box(velocity_steps, &tight, margin, params, parent);
         let valid = tight.is_valid() && fat.is_valid();
 
         if id as usize >= self.proxies.len() {
@@ -287,6 +334,8 @@ impl CanopyBroadPhase {
             let has_ff = filter.active.contains(ActiveCollisionTypes::FIXED_FIXED);
             self.fixed_fixed = self.fixed_fixed + has_ff as usize - had_ff as usize;
             p.filter = filter;
+            // A filter change can widen what the tree summary must cover.
+            self.trees[mobility as usize].summary.add(&p.filter);
             moved = true;
         }
         if !p.is_valid() || p.mobility != mobility {
@@ -303,9 +352,6 @@ impl CanopyBroadPhase {
             p.fat = fat;
             self.trees[mobility as usize].set_box(&p);
             moved = true;
-        } else if moved {
-            // A filter change can widen what the tree summary must cover.
-            self.trees[mobility as usize].summary.add(&p.filter);
         }
         self.proxies[id as usize] = Some(p);
         if moved {
@@ -323,23 +369,15 @@ impl CanopyBroadPhase {
         }
     }
 
-    /// Step 5 for one moved proxy: partners it should have, as `(id, other)`.
-    fn find_pairs(&self, id: u32, out: &mut Vec<(u32, u32)>) {
+    /// Step 5 for a pending proxy (not in a BVH yet): its partners, found by a query on every
+    /// tree it may pair with. Among pending proxies the one with the smaller id reports.
+    fn pending_pairs(&self, id: u32, out: &mut Vec<(u32, u32)>) {
         let Some(p) = &self.proxies[id as usize] else {
             return;
         };
-        if !p.is_valid() {
-            return;
-        }
         for m in Mobility::ALL {
             let tree = &self.trees[m as usize];
-            if tree.len() == 0 {
-                continue;
-            }
-            if m == Mobility::Fixed && p.mobility == Mobility::Fixed && self.fixed_fixed == 0 {
-                continue;
-            }
-            if !tree.summary.may_pair_with(&p.filter) {
+            if tree.len() == 0 || !self.may_query(p, m) {
                 continue;
             }
             tree.query(&p.fat, &self.proxies, |other| {
@@ -349,8 +387,7 @@ impl CanopyBroadPhase {
                 let Some(o) = &self.proxies[other as usize] else {
                     return;
                 };
-                // When both moved, the one with the smaller id reports the pair.
-                if o.moved && other < id {
+                if matches!(o.loc, Loc::Pending(_)) && other < id {
                     return;
                 }
                 if p.filter.may_pair(&o.filter) {
@@ -358,6 +395,100 @@ impl CanopyBroadPhase {
                 }
             });
         }
+    }
+
+    /// `false` when no collider of tree `m` can pair with `p`.
+    fn may_query(&self, p: &Proxy, m: Mobility) -> bool {
+        if m == Mobility::Fixed && p.mobility == Mobility::Fixed && self.fixed_fixed == 0 {
+            return false;
+        }
+        self.trees[m as usize].summary.may_pair_with(&p.filter)
+    }
+
+    /// `false` when no collider of tree `a` can pair with one of tree `b`.
+    fn trees_may_pair(&self, a: Mobility, b: Mobility) -> bool {
+        if a == Mobility::Fixed && b == Mobility::Fixed && self.fixed_fixed == 0 {
+            return false;
+        }
+        let (ta, tb) = (&self.trees[a as usize], &self.trees[b as usize]);
+        ta.len() > 0 && tb.len() > 0 && ta.summary.may_pair_with_tree(&tb.summary)
+    }
+
+    /// Step 5: every new candidate pair of a moved proxy. Tree members that moved are marked
+    /// and found by one marked pair walk per pair of trees; pending proxies query.
+    fn find_new_pairs(&mut self, moved: &[u32]) -> Vec<(u32, u32)> {
+        let mut marked = [false; 3];
+        for &id in moved {
+            if let Some(p) = &self.proxies[id as usize] {
+                if let Loc::Tree(slot) = p.loc {
+                    let t = &mut self.trees[p.mobility as usize];
+                    t.scratch_marks[slot as usize] = true;
+                    marked[p.mobility as usize] = true;
+                }
+            }
+        }
+        let marks: [Option<PairMarks>; 3] = std::array::from_fn(|i| {
+            marked[i].then(|| {
+                let t = &self.trees[i];
+                t.bvh.marks(|prim| t.scratch_marks[prim as usize])
+            })
+        });
+        for t in &mut self.trees {
+            t.scratch_marks.fill(false);
+        }
+
+        let parallel = self.config.parallel;
+        let mut found = Vec::new();
+        use Mobility::*;
+        for (a, b) in [
+            (Dynamic, Dynamic),
+            (Dynamic, Kinematic),
+            (Dynamic, Fixed),
+            (Kinematic, Kinematic),
+            (Kinematic, Fixed),
+            (Fixed, Fixed),
+        ] {
+            let (ia, ib) = (a as usize, b as usize);
+            if (marks[ia].is_none() && marks[ib].is_none()) || !self.trees_may_pair(a, b) {
+                continue;
+            }
+            let (ta, tb) = (&self.trees[ia], &self.trees[ib]);
+            let ma = marks[ia].as_ref().unwrap_or(&ta.no_marks);
+            let mb = marks[ib].as_ref().unwrap_or(&tb.no_marks);
+            let mut keep = |x: u32, y: u32| {
+                let (px, py) = (ta.members[x as usize], tb.members[y as usize]);
+                if px == DEAD || py == DEAD {
+                    return;
+                }
+                let (Some(p), Some(q)) = (&self.proxies[px as usize], &self.proxies[py as usize])
+                else {
+                    return;
+                };
+                if p.filter.may_pair(&q.filter) {
+                    found.push((px, py));
+                }
+            };
+            match (a == b, parallel) {
+                (true, true) => ta
+                    .bvh
+                    .par_self_pairs_marked(ma)
+                    .into_iter()
+                    .for_each(|(x, y)| keep(x, y)),
+                (true, false) => ta.bvh.self_pairs_marked(ma, &mut keep),
+                (false, true) => ta
+                    .bvh
+                    .par_pairs_with_marked(ma, &tb.bvh, mb)
+                    .into_iter()
+                    .for_each(|(x, y)| keep(x, y)),
+                (false, false) => ta.bvh.pairs_with_marked(ma, &tb.bvh, mb, &mut keep),
+            }
+        }
+        for t in 0..3 {
+            for &id in &self.trees[t].pending {
+                self.pending_pairs(id, &mut found);
+            }
+        }
+        found
     }
 }
 
@@ -424,26 +555,9 @@ impl BroadPhase for CanopyBroadPhase {
         }
 
         // 5. New pairs.
-        let found: Vec<Vec<(u32, u32)>> = if self.config.parallel && moved.len() > QUERY_CHUNK {
-            moved
-                .par_chunks(QUERY_CHUNK)
-                .map(|chunk| {
-                    let mut out = Vec::new();
-                    for &id in chunk {
-                        self.find_pairs(id, &mut out);
-                    }
-                    out
-                })
-                .collect()
-        } else {
-            let mut out = Vec::new();
-            for &id in &moved {
-                self.find_pairs(id, &mut out);
-            }
-            vec![out]
-        };
+        let found = self.find_new_pairs(&moved);
         let deleted = events.len() - events_before;
-        for (a, b) in found.into_iter().flatten() {
+        for (a, b) in found {
             if self.pairs.insert(a, b) {
                 let (a, b) = if a < b { (a, b) } else { (b, a) };
                 let (pa, pb) = (&self.proxies[a as usize], &self.proxies[b as usize]);

@@ -46,6 +46,12 @@ pub struct CanopyBroadPhaseConfig {
     /// inside, the collider costs nothing. Larger margins mean fewer updates but more candidate
     /// pairs. Default: 0.1 (Box2D's `b2_aabbMargin`).
     pub margin: f32,
+    /// Fat boxes also cover where the collider will be after this many steps at its parent's
+    /// current linear velocity, so that steadily moving bodies stay inside their box for that
+    /// long. 0 disables it. It never affects correctness (every step still checks the exact
+    /// box), only how often boxes are re-enlarged against how many extra pairs are reported.
+    /// Default: 2.
+    pub velocity_steps: f32,
     /// Tree maintenance. See [`RebuildPolicy`].
     pub rebuild: RebuildPolicy,
     /// Search new pairs and rebuild trees with rayon (the current pool). Results and event order
@@ -57,6 +63,7 @@ impl Default for CanopyBroadPhaseConfig {
     fn default() -> Self {
         Self {
             margin: 0.1,
+            velocity_steps: 2.0,
             rebuild: RebuildPolicy::default(),
             parallel: true,
         }

@@ -16,18 +16,29 @@ pub(crate) struct FilterData {
 }
 
 impl FilterData {
-    pub fn of(collider: &Collider, bodies: &RigidBodySet) -> Self {
-        let parent = collider.parent();
-        let body_type = parent
-            .and_then(|h| bodies.get(h))
-            .map(|b| b.body_type())
-            .unwrap_or(RigidBodyType::Fixed);
+    /// The filter inputs of `collider`, whose parent body (if any) is `parent`.
+    #[inline]
+    pub fn new(collider: &Collider, parent: Option<&RigidBody>) -> Self {
         Self {
-            parent,
-            body_type,
+            parent: collider.parent(),
+            body_type: parent
+                .map(|b| b.body_type())
+                .unwrap_or(RigidBodyType::Fixed),
             groups: collider.collision_groups(),
             active: collider.active_collision_types(),
         }
+    }
+
+    /// `self == FilterData::new(collider, parent)`, without building the new one.
+    #[inline]
+    pub fn same_as(&self, collider: &Collider, parent: Option<&RigidBody>) -> bool {
+        self.parent == collider.parent()
+            && self.body_type
+                == parent
+                    .map(|b| b.body_type())
+                    .unwrap_or(RigidBodyType::Fixed)
+            && self.groups == collider.collision_groups()
+            && self.active == collider.active_collision_types()
     }
 
     /// `true` when the narrow phase could make contacts between the two colliders.
@@ -89,6 +100,20 @@ impl TreeFilterSummary {
     pub fn add(&mut self, f: &FilterData) {
         self.body_types |= 1 << f.body_type as u32;
         self.active |= f.active.bits();
+    }
+
+    /// `false` only when no member of this tree can pair with a member of `other`.
+    pub fn may_pair_with_tree(&self, other: &TreeFilterSummary) -> bool {
+        let (ua, ub) = (
+            ActiveCollisionTypes::from_bits_truncate(self.active),
+            ActiveCollisionTypes::from_bits_truncate(other.active),
+        );
+        BODY_TYPES.iter().any(|&ta| {
+            self.body_types & (1 << ta as u32) != 0
+                && BODY_TYPES.iter().any(|&tb| {
+                    other.body_types & (1 << tb as u32) != 0 && (ua.test(ta, tb) || ub.test(ta, tb))
+                })
+        })
     }
 
     /// `false` only when no member of the tree can pair with a collider of filter `f`.

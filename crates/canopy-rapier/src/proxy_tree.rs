@@ -6,7 +6,10 @@
 use crate::config::RebuildPolicy;
 use crate::filter::TreeFilterSummary;
 use crate::proxy::{Loc, Proxy};
-use canopy_core::{Aabb, BuildOptions, Builder, Bvh};
+use canopy_core::{Aabb, BuildOptions, Builder, Bvh, PairMarks};
+
+/// Refits between two comparisons of the SAH cost with the cost after the last build.
+const COST_CHECK_INTERVAL: u32 = 4;
 
 /// Marks a slot whose proxy has left the tree.
 pub(crate) const DEAD: u32 = u32::MAX;
@@ -14,15 +17,20 @@ pub(crate) const DEAD: u32 = u32::MAX;
 #[derive(Clone, Debug, Default)]
 pub(crate) struct ProxyTree {
     pub bvh: Bvh,
-    /// Fat box of each BVH slot (dead slots keep their last box until the next rebuild).
-    pub boxes: Vec<Aabb>,
+    /// New fat boxes of BVH primitives since the last refit.
+    changes: Vec<(u32, Aabb)>,
     /// Proxy id of each BVH slot, or [`DEAD`].
     pub members: Vec<u32>,
     pub pending: Vec<u32>,
     pub dead: usize,
-    /// Some slot box changed since the last refit.
-    pub dirty: bool,
+    /// Refits since the SAH cost was last compared with the cost after the build.
+    refits_since_check: u32,
     pub summary: TreeFilterSummary,
+    /// Marks with nothing marked, for pair walks against this tree when none of it moved.
+    pub no_marks: PairMarks,
+    /// Per BVH primitive, scratch space for marking moved proxies (always all `false` between
+    /// updates).
+    pub scratch_marks: Vec<bool>,
     built_cost: f64,
     pub rebuilds: u64,
     pub refits: u64,
@@ -61,8 +69,7 @@ impl ProxyTree {
     /// Records a new fat box for a proxy of this tree.
     pub fn set_box(&mut self, proxy: &Proxy) {
         if let Loc::Tree(slot) = proxy.loc {
-            self.boxes[slot as usize] = proxy.fat;
-            self.dirty = true;
+            self.changes.push((slot, proxy.fat));
         }
     }
 
@@ -85,17 +92,23 @@ impl ProxyTree {
     ) {
         if self.needs_rebuild(policy) {
             self.rebuild(proxies, builder, parallel);
-        } else if self.dirty {
-            self.dirty = false;
+        } else if !self.changes.is_empty() {
             self.refits += 1;
-            if self.bvh.refit(&self.boxes).is_err() {
+            let refit = self.bvh.refit_primitives(&self.changes);
+            self.changes.clear();
+            if refit.is_err() {
                 // Boxes are validated before they reach the tree; rebuilding is the safe answer
                 // should that ever fail.
                 self.rebuild(proxies, builder, parallel);
                 return;
             }
-            if self.bvh.sah_cost(1.0, 1.0) > self.built_cost * policy.max_cost_growth {
-                self.rebuild(proxies, builder, parallel);
+            // The cost is one pass over the nodes: check it every few refits only.
+            self.refits_since_check += 1;
+            if self.refits_since_check >= COST_CHECK_INTERVAL {
+                self.refits_since_check = 0;
+                if self.bvh.sah_cost(1.0, 1.0) > self.built_cost * policy.max_cost_growth {
+                    self.rebuild(proxies, builder, parallel);
+                }
             }
         }
     }
@@ -109,6 +122,8 @@ impl ProxyTree {
             .collect();
         members.append(&mut self.pending);
         let mut boxes = Vec::with_capacity(members.len());
+        self.changes.clear();
+        self.refits_since_check = 0;
         self.summary = TreeFilterSummary::default();
         for (slot, &id) in members.iter().enumerate() {
             let p = proxies[id as usize]
@@ -129,11 +144,9 @@ impl ProxyTree {
             Ok(bvh) => {
                 self.bvh = bvh;
                 self.members = members;
-                self.boxes = boxes;
             }
             Err(_) => {
                 self.bvh = Bvh::new();
-                self.boxes.clear();
                 self.members.clear();
                 for (i, &id) in members.iter().enumerate() {
                     if let Some(p) = proxies[id as usize].as_mut() {
@@ -143,8 +156,9 @@ impl ProxyTree {
                 self.pending = members;
             }
         }
+        self.no_marks = self.bvh.marks(|_| false);
+        self.scratch_marks = vec![false; self.members.len()];
         self.dead = 0;
-        self.dirty = false;
         self.built_cost = self.bvh.sah_cost(1.0, 1.0);
         self.rebuilds += 1;
     }

@@ -3,11 +3,8 @@
 
 use crate::scene::{HookCtx, Scene};
 use rapier3d::dynamics::{CCDSolver, IntegrationParameters, IslandManager, RigidBodySet};
-use rapier3d::geometry::{
-    BroadPhase, BroadPhasePairEvent, ColliderHandle, ColliderSet, NarrowPhase,
-};
+use rapier3d::geometry::{BroadPhase, ColliderSet, NarrowPhase};
 use rapier3d::pipeline::PhysicsPipeline;
-use std::ptr::NonNull;
 use std::time::{Duration, Instant};
 
 /// A scene plus all the Rapier pipeline state, stepped with any broadphase.
@@ -30,8 +27,6 @@ pub struct World<B: BroadPhase> {
     pub ccd: CCDSolver,
     steps: usize,
     last_step: Duration,
-    last_broad_phase: Duration,
-    last_broad_phase_calls: usize,
 }
 
 impl<B: BroadPhase> World<B> {
@@ -49,8 +44,6 @@ impl<B: BroadPhase> World<B> {
             ccd: CCDSolver::new(),
             steps: 0,
             last_step: Duration::ZERO,
-            last_broad_phase: Duration::ZERO,
-            last_broad_phase_calls: 0,
         }
     }
 
@@ -80,13 +73,12 @@ impl<B: BroadPhase> World<B> {
             });
         }
 
-        let mut timed = TimedBroadPhase::new(&mut self.broad_phase);
         let start = Instant::now();
         self.pipeline.step(
             gravity,
             params,
             &mut self.islands,
-            &mut timed,
+            &mut self.broad_phase,
             &mut self.narrow_phase,
             bodies,
             colliders,
@@ -97,8 +89,6 @@ impl<B: BroadPhase> World<B> {
             &(),
         );
         self.last_step = start.elapsed();
-        self.last_broad_phase = timed.elapsed;
-        self.last_broad_phase_calls = timed.calls;
         self.steps += 1;
     }
 
@@ -124,22 +114,6 @@ impl<B: BroadPhase> World<B> {
         self.last_step.as_secs_f64() * 1000.0
     }
 
-    /// Wall-clock milliseconds spent in `BroadPhase::update` during the last
-    /// step, summed over its calls (Rapier calls it twice per step, once for
-    /// the user's changes and once after integrating the positions, plus once
-    /// per extra CCD substep); 0 before the first step.
-    ///
-    /// This is what Rapier's `counters.broad_phase_time_ms()` measures when
-    /// its `profiler` feature is on, but it works without it.
-    pub fn broad_phase_ms_last_step(&self) -> f64 {
-        self.last_broad_phase.as_secs_f64() * 1000.0
-    }
-
-    /// How many times `BroadPhase::update` ran during the last step.
-    pub fn broad_phase_calls_last_step(&self) -> usize {
-        self.last_broad_phase_calls
-    }
-
     /// The integration parameters the scene is stepped with.
     pub fn params(&self) -> &IntegrationParameters {
         &self.scene.params
@@ -158,64 +132,5 @@ impl<B: BroadPhase> World<B> {
     /// Gives the scene and the broad-phase back.
     pub fn into_parts(self) -> (Scene, B) {
         (self.scene, self.broad_phase)
-    }
-}
-
-/// Forwards to the broad-phase of a [`World`] and times every `update`.
-///
-/// Rapier takes the broad-phase as `&mut dyn BroadPhase`, and `BroadPhase`
-/// requires `'static`, so a wrapper holding `&mut B` is not allowed; this one
-/// holds a pointer instead. It only lives inside [`World::step`], where it is
-/// built from `&mut self.broad_phase` and dropped before that borrow ends.
-struct TimedBroadPhase<B: BroadPhase> {
-    inner: NonNull<B>,
-    elapsed: Duration,
-    calls: usize,
-}
-
-impl<B: BroadPhase> TimedBroadPhase<B> {
-    fn new(inner: &mut B) -> Self {
-        TimedBroadPhase {
-            inner: NonNull::from(inner),
-            elapsed: Duration::ZERO,
-            calls: 0,
-        }
-    }
-}
-
-// SAFETY: a `TimedBroadPhase<B>` stands for the `&mut B` it was built from,
-// which is `Send` and `Sync` because `B: BroadPhase` is `Send + Sync`.
-#[allow(unsafe_code)]
-unsafe impl<B: BroadPhase> Send for TimedBroadPhase<B> {}
-// SAFETY: as above.
-#[allow(unsafe_code)]
-unsafe impl<B: BroadPhase> Sync for TimedBroadPhase<B> {}
-
-impl<B: BroadPhase> BroadPhase for TimedBroadPhase<B> {
-    fn update(
-        &mut self,
-        params: &IntegrationParameters,
-        colliders: &ColliderSet,
-        bodies: &RigidBodySet,
-        modified_colliders: &[ColliderHandle],
-        removed_colliders: &[ColliderHandle],
-        events: &mut Vec<BroadPhasePairEvent>,
-    ) {
-        // SAFETY: `inner` comes from a `&mut B` that outlives `self` (see
-        // `World::step`) and that nothing else uses while `self` exists;
-        // `&mut self` makes this the only access.
-        #[allow(unsafe_code)]
-        let inner = unsafe { self.inner.as_mut() };
-        let start = Instant::now();
-        inner.update(
-            params,
-            colliders,
-            bodies,
-            modified_colliders,
-            removed_colliders,
-            events,
-        );
-        self.elapsed += start.elapsed();
-        self.calls += 1;
     }
 }

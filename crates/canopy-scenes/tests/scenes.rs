@@ -57,12 +57,7 @@ fn small_scenes_build_and_step() {
             w.step();
         }
         assert_eq!(w.steps(), 10);
-        assert!(w.broad_phase_calls_last_step() >= 2, "{name}");
         assert!(w.step_ms_last_step() > 0.0, "{name}");
-        assert!(
-            w.step_ms_last_step() >= w.broad_phase_ms_last_step(),
-            "{name}"
-        );
         assert_eq!(w.scene.num_bodies(), n, "{name}: population changed");
         for (h, p) in positions(&w.scene) {
             assert!(p.iter().all(|c| c.is_finite()), "{name}: {h:?} at {p:?}");

@@ -1,0 +1,70 @@
+//! Broadphase benchmark, one criterion group per standard scene (full size): Rapier's built-in
+//! `BroadPhaseBvh` against `CanopyBroadPhase`, timing `BroadPhase::update` alone over a recorded
+//! sequence of steps. The sequence is recorded once per scene from a simulation stepped with
+//! Rapier's own broadphase; each measured iteration replays it (after the first update, which
+//! inserts every collider and is replayed untimed) into a copy of a broadphase that has already
+//! seen that first update. Single thread: canopy runs inside a 1-thread rayon pool.
+//!
+//! `cargo bench --bench broadphase [-- SCENE]`; the time is for the whole sequence, divide by
+//! the number of steps printed for ms per step.
+
+use canopy::rapier::CanopyBroadPhase;
+use canopy::scenes::harness::{replay, Recorder, RecordedUpdate};
+use canopy::scenes::{scene, Size, World, SCENE_NAMES};
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
+use rapier3d::geometry::{BroadPhase, BroadPhaseBvh};
+use std::time::Duration;
+
+/// Steps recorded per scene: the big scenes record fewer (each record clones the sets).
+fn recorded_steps(name: &str) -> usize {
+    match name {
+        "many_static" | "many_sleep" => 8,
+        "keva_tower" => 30,
+        _ => 40,
+    }
+}
+
+fn record(name: &str) -> Vec<RecordedUpdate> {
+    let s = scene(name, Size::Full).expect("known scene");
+    let mut world = World::new(s, Recorder::new(BroadPhaseBvh::new()));
+    world.step_n(recorded_steps(name));
+    world.broad_phase.updates
+}
+
+fn primed<B: BroadPhase>(mut bp: B, first: &RecordedUpdate) -> B {
+    replay(&mut bp, std::slice::from_ref(first));
+    bp
+}
+
+fn bench_scenes(c: &mut Criterion) {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    let filter: Option<String> = std::env::args().skip(1).find(|a| !a.starts_with('-'));
+    for &name in SCENE_NAMES {
+        if let Some(f) = &filter {
+            if !name.contains(f.as_str()) && !f.contains(name) {
+                continue;
+            }
+        }
+        let updates = record(name);
+        let (first, rest) = updates.split_first().expect("at least one update");
+        println!("broadphase/{name}: {} timed steps per iteration", rest.len());
+        let mut g = c.benchmark_group(format!("broadphase/{name}"));
+        g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(4));
+        let rapier = primed(BroadPhaseBvh::new(), first);
+        g.bench_function("rapier", |b| {
+            b.iter_batched(|| rapier.clone(), |mut bp| replay(&mut bp, rest), BatchSize::LargeInput)
+        });
+        let canopy = pool.install(|| primed(CanopyBroadPhase::new(), first));
+        g.bench_function("canopy", |b| {
+            b.iter_batched(
+                || canopy.clone(),
+                |mut bp| pool.install(|| replay(&mut bp, rest)),
+                BatchSize::LargeInput,
+            )
+        });
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench_scenes);
+criterion_main!(benches);

@@ -1,0 +1,48 @@
+//! Profiling aid: records a standard scene's broadphase inputs (stepped with Rapier's own
+//! broadphase), then replays them into a fresh broadphase and prints the time per update.
+//! Run it under `valgrind --tool=callgrind --toggle-collect='*harness*replay*'` for stable
+//! instruction counts of the replay alone.
+//!
+//! `cargo run --release --example broadphase_replay -- SCENE rapier|canopy [STEPS] [small|full]`
+
+use canopy::rapier::CanopyBroadPhase;
+use canopy::scenes::harness::{replay, Recorder};
+use canopy::scenes::{scene, Size, World};
+use rapier3d::geometry::{BroadPhase, BroadPhaseBvh};
+use std::time::Instant;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let name = args.first().map(String::as_str).unwrap_or("balls");
+    let which = args.get(1).map(String::as_str).unwrap_or("canopy");
+    let steps: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(40);
+    let size = if args.get(3).map(String::as_str) == Some("small") { Size::Small } else { Size::Full };
+    let Some(s) = scene(name, size) else {
+        eprintln!("unknown scene {name}");
+        std::process::exit(2);
+    };
+    let mut world = World::new(s, Recorder::new(BroadPhaseBvh::new()));
+    world.step_n(steps);
+    let updates = world.broad_phase.updates;
+    let (first, rest) = updates.split_first().expect("one update at least");
+    let mut bp: Box<dyn BroadPhase> = match which {
+        "rapier" => Box::new(BroadPhaseBvh::new()),
+        _ => Box::new(CanopyBroadPhase::new()),
+    };
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    pool.install(|| {
+        let mut events = Vec::new();
+        bp.update(&first.params, &first.colliders, &first.bodies, &first.modified, &first.removed, &mut events);
+        let t = Instant::now();
+        let events = replay(bp.as_mut(), rest);
+        let secs = t.elapsed().as_secs_f64();
+        println!(
+            "{name} {which}: {} updates, {events} events, {:.3} ms per update",
+            rest.len(),
+            secs * 1000.0 / rest.len() as f64
+        );
+        if let Some(c) = bp.as_any().downcast_ref::<CanopyBroadPhase>() {
+            println!("{:?}", c.stats());
+        }
+    });
+}
