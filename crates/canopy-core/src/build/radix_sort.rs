@@ -85,6 +85,18 @@ struct Dest {
 unsafe impl Send for Dest {}
 unsafe impl Sync for Dest {}
 
+impl Dest {
+    /// Writes `(k, v)` at slot `o`.
+    ///
+    /// # Safety
+    /// `o` is in bounds of both destinations and no other thread writes slot `o`.
+    #[inline(always)]
+    unsafe fn write(&self, o: usize, k: u64, v: u32) {
+        *self.keys.add(o) = k;
+        *self.vals.add(o) = v;
+    }
+}
+
 fn scatter_parallel(keys: &[u64], vals: &[u32], dk: &mut [u64], dv: &mut [u32], pass: u32) {
     let n = keys.len();
     let chunks = (rayon::current_num_threads() * 4).clamp(1, n.div_ceil(4096));
@@ -118,16 +130,12 @@ fn scatter_parallel(keys: &[u64], vals: &[u32], dk: &mut [u64], dv: &mut [u32], 
         .zip(vals.par_chunks(chunk_len))
         .zip(hist.par_iter_mut())
         .for_each(|((ck, cv), offsets)| {
-            let dest = dest;
             for (&k, &v) in ck.iter().zip(cv) {
                 let d = digit(k, pass);
                 let o = offsets[d];
                 // SAFETY: `o < n` and no other chunk owns slot `o` (offsets above are a
                 // partition of 0..n); the destination slices outlive this scope.
-                unsafe {
-                    *dest.keys.add(o) = k;
-                    *dest.vals.add(o) = v;
-                }
+                unsafe { dest.write(o, k, v) };
                 offsets[d] = o + 1;
             }
         });

@@ -57,7 +57,7 @@ impl Bvh {
         max_distance: f32,
         mut distance: impl FnMut(u32, f32) -> Option<f32>,
     ) -> Option<NearestHit> {
-        if self.nodes.is_empty() || !(max_distance >= 0.0) {
+        if self.nodes.is_empty() || max_distance.is_nan() || max_distance < 0.0 {
             return None;
         }
         let mut best: Option<NearestHit> = None;

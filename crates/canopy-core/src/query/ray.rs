@@ -76,7 +76,7 @@ impl Bvh {
         mut hit: impl FnMut(u32, f32) -> Option<f32>,
     ) -> Option<RayHit> {
         let root = self.nodes.first()?;
-        if !(t_max >= 0.0) {
+        if t_max.is_nan() || t_max < 0.0 {
             return None;
         }
         ray.slab(&root.min, &root.max, t_max)?;
