@@ -139,12 +139,12 @@ impl CanopyBroadPhase {
         let Some(mut p) = self.proxies.get_mut(id as usize).and_then(Option::take) else {
             return;
         };
+        if !p.is_valid() {
+            self.stats.invalid -= 1;
+        }
         self.take_out_of_tree(&mut p);
         if p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED) {
             self.fixed_fixed -= 1;
-        }
-        if !p.is_valid() {
-            self.stats.invalid -= 1;
         }
         self.pairs.remove_all(id);
     }

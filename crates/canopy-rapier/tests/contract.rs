@@ -112,6 +112,18 @@ impl BroadPhase for Checked {
             ));
         }
         let prediction = params.prediction_distance() / 2.0;
+        let invalid = colliders
+            .iter()
+            .filter(|(_, c)| c.is_enabled() && !valid(&c.compute_collision_aabb(prediction)))
+            .count();
+        if invalid != self.inner.stats().invalid {
+            self.violations.push(format!(
+                "update {}: {} invalid colliders, stats say {}",
+                self.updates,
+                invalid,
+                self.inner.stats().invalid
+            ));
+        }
         let all: Vec<(ColliderHandle, &Collider, _)> = colliders
             .iter()
             .filter(|(_, c)| c.is_enabled())
