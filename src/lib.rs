@@ -21,3 +21,8 @@ pub use canopy_core as core;
 pub use canopy_rapier as rapier;
 pub use canopy_scenes as scenes;
 pub use rapier3d;
+
+/// The README's examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
