@@ -433,8 +433,12 @@ impl CanopyBroadPhase {
                 t.bvh.marks(|prim| t.scratch_marks[prim as usize])
             })
         });
-        for t in &mut self.trees {
-            t.scratch_marks.fill(false);
+        for &id in moved {
+            if let Some(p) = &self.proxies[id as usize] {
+                if let Loc::Tree(slot) = p.loc {
+                    self.trees[p.mobility as usize].scratch_marks[slot as usize] = false;
+                }
+            }
         }
 
         let parallel = self.config.parallel;
@@ -503,6 +507,13 @@ impl BroadPhase for CanopyBroadPhase {
         events: &mut Vec<BroadPhasePairEvent>,
     ) {
         let events_before = events.len();
+        if modified_colliders.is_empty() && removed_colliders.is_empty() {
+            // Nothing changed, so no pair can start or end.
+            self.stats.moved = 0;
+            self.stats.added = 0;
+            self.stats.deleted = 0;
+            return;
+        }
         // 1. Removals first.
         for &handle in removed_colliders {
             if self.proxy(handle).is_some() {

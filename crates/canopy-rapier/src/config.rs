@@ -15,7 +15,7 @@ pub struct RebuildPolicy {
     /// last build. Default: 1.5.
     pub max_cost_growth: f64,
     /// New colliders wait in a small unsorted list that is scanned linearly; the tree is rebuilt
-    /// once that list exceeds `max(min_pending, tree size * pending_fraction)`. Defaults: 64 and
+    /// once that list exceeds `max(min_pending, tree size * pending_fraction)`. Defaults: 16 and
     /// 1/16.
     pub min_pending: usize,
     /// See [`RebuildPolicy::min_pending`].
@@ -31,7 +31,7 @@ impl Default for RebuildPolicy {
             moving_builder: Builder::Lbvh,
             fixed_builder: Builder::BinnedSah,
             max_cost_growth: 1.5,
-            min_pending: 64,
+            min_pending: 16,
             pending_fraction: 1.0 / 16.0,
             max_dead_fraction: 0.25,
         }
