@@ -4,6 +4,7 @@
 //! first and writes the same depth-first [`Bvh`] layout.
 
 mod binned_sah;
+pub(crate) mod f4;
 mod lbvh;
 mod radix_sort;
 

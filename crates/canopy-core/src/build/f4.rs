@@ -1,0 +1,214 @@
+//! A four-lane `f32` vector for the builders' and queries' inner loops: SSE2 on x86_64 (always
+//! available there), plain arrays elsewhere. Boxes use lanes 0..3; lane 3 is padding that the
+//! callers keep finite (usually 0) so that arithmetic on it never meets denormals or NaNs.
+//!
+//! `min`/`max` follow the SSE rule (`a < b ? a : b`): only used on finite data.
+
+#![allow(dead_code)]
+
+#[cfg(target_arch = "x86_64")]
+mod imp {
+    use std::arch::x86_64::*;
+
+    #[derive(Clone, Copy, Debug)]
+    #[repr(transparent)]
+    pub(crate) struct F4(pub(crate) __m128);
+
+    impl F4 {
+        #[inline(always)]
+        pub(crate) fn splat(v: f32) -> F4 {
+            // SAFETY: SSE2 is part of the x86_64 baseline.
+            unsafe { F4(_mm_set1_ps(v)) }
+        }
+        #[inline(always)]
+        pub(crate) fn new(a: f32, b: f32, c: f32, d: f32) -> F4 {
+            unsafe { F4(_mm_set_ps(d, c, b, a)) }
+        }
+        /// Loads four lanes from 16 bytes at `p` (any alignment).
+        #[inline(always)]
+        pub(crate) fn load4(p: &[f32; 4]) -> F4 {
+            unsafe { F4(_mm_loadu_ps(p.as_ptr())) }
+        }
+        #[inline(always)]
+        pub(crate) fn to_array(self) -> [f32; 4] {
+            let mut a = [0.0f32; 4];
+            unsafe { _mm_storeu_ps(a.as_mut_ptr(), self.0) };
+            a
+        }
+        #[inline(always)]
+        pub(crate) fn add(self, o: F4) -> F4 {
+            unsafe { F4(_mm_add_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        pub(crate) fn sub(self, o: F4) -> F4 {
+            unsafe { F4(_mm_sub_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        pub(crate) fn mul(self, o: F4) -> F4 {
+            unsafe { F4(_mm_mul_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        pub(crate) fn min(self, o: F4) -> F4 {
+            unsafe { F4(_mm_min_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        pub(crate) fn max(self, o: F4) -> F4 {
+            unsafe { F4(_mm_max_ps(self.0, o.0)) }
+        }
+        /// Lane 3 set to 0.
+        #[inline(always)]
+        pub(crate) fn xyz0(self) -> F4 {
+            unsafe {
+                let m = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
+                F4(_mm_and_ps(self.0, m))
+            }
+        }
+        /// `self` where `mask` is set, else `other` (`mask` from a comparison).
+        #[inline(always)]
+        pub(crate) fn select(mask: F4, a: F4, b: F4) -> F4 {
+            unsafe {
+                F4(_mm_or_ps(
+                    _mm_and_ps(mask.0, a.0),
+                    _mm_andnot_ps(mask.0, b.0),
+                ))
+            }
+        }
+        /// All lanes set when `m`, else all clear.
+        #[inline(always)]
+        pub(crate) fn mask(m: bool) -> F4 {
+            unsafe { F4(_mm_castsi128_ps(_mm_set1_epi32(-(m as i32)))) }
+        }
+        /// `x*y + y*z + z*x` of lanes 0..3 (half the surface area of a box of these extents).
+        #[inline(always)]
+        pub(crate) fn half_area(self) -> f32 {
+            unsafe {
+                let yzx = _mm_shuffle_ps::<0b11_00_10_01>(self.0, self.0);
+                let p = _mm_mul_ps(self.0, yzx);
+                let p1 = _mm_shuffle_ps::<0b11_11_11_01>(p, p);
+                let p2 = _mm_movehl_ps(p, p);
+                _mm_cvtss_f32(_mm_add_ss(_mm_add_ss(p, p1), p2))
+            }
+        }
+        /// Truncates lanes to `i32` (lanes must be in range; callers clamp first).
+        #[inline(always)]
+        pub(crate) fn to_i32(self) -> [i32; 4] {
+            let mut a = [0i32; 4];
+            unsafe {
+                _mm_storeu_si128(a.as_mut_ptr() as *mut __m128i, _mm_cvttps_epi32(self.0));
+            }
+            a
+        }
+        #[inline(always)]
+        pub(crate) fn lane(self, i: usize) -> f32 {
+            self.to_array()[i]
+        }
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+mod imp {
+    #[derive(Clone, Copy, Debug)]
+    #[repr(C, align(16))]
+    pub(crate) struct F4(pub(crate) [f32; 4]);
+
+    #[inline(always)]
+    fn zip(a: F4, b: F4, f: impl Fn(f32, f32) -> f32) -> F4 {
+        F4([
+            f(a.0[0], b.0[0]),
+            f(a.0[1], b.0[1]),
+            f(a.0[2], b.0[2]),
+            f(a.0[3], b.0[3]),
+        ])
+    }
+
+    impl F4 {
+        #[inline(always)]
+        pub(crate) fn splat(v: f32) -> F4 {
+            F4([v; 4])
+        }
+        #[inline(always)]
+        pub(crate) fn new(a: f32, b: f32, c: f32, d: f32) -> F4 {
+            F4([a, b, c, d])
+        }
+        #[inline(always)]
+        pub(crate) fn load4(p: &[f32; 4]) -> F4 {
+            F4(*p)
+        }
+        #[inline(always)]
+        pub(crate) fn to_array(self) -> [f32; 4] {
+            self.0
+        }
+        #[inline(always)]
+        pub(crate) fn add(self, o: F4) -> F4 {
+            zip(self, o, |a, b| a + b)
+        }
+        #[inline(always)]
+        pub(crate) fn sub(self, o: F4) -> F4 {
+            zip(self, o, |a, b| a - b)
+        }
+        #[inline(always)]
+        pub(crate) fn mul(self, o: F4) -> F4 {
+            zip(self, o, |a, b| a * b)
+        }
+        #[inline(always)]
+        pub(crate) fn min(self, o: F4) -> F4 {
+            zip(self, o, |a, b| if a < b { a } else { b })
+        }
+        #[inline(always)]
+        pub(crate) fn max(self, o: F4) -> F4 {
+            zip(self, o, |a, b| if a > b { a } else { b })
+        }
+        #[inline(always)]
+        pub(crate) fn xyz0(self) -> F4 {
+            F4([self.0[0], self.0[1], self.0[2], 0.0])
+        }
+        #[inline(always)]
+        pub(crate) fn select(mask: F4, a: F4, b: F4) -> F4 {
+            let m = |i: usize| {
+                f32::from_bits(
+                    (mask.0[i].to_bits() & a.0[i].to_bits())
+                        | (!mask.0[i].to_bits() & b.0[i].to_bits()),
+                )
+            };
+            F4([m(0), m(1), m(2), m(3)])
+        }
+        #[inline(always)]
+        pub(crate) fn mask(m: bool) -> F4 {
+            F4([f32::from_bits(if m { u32::MAX } else { 0 }); 4])
+        }
+        #[inline(always)]
+        pub(crate) fn half_area(self) -> f32 {
+            let e = self.0;
+            e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+        }
+        #[inline(always)]
+        pub(crate) fn to_i32(self) -> [i32; 4] {
+            self.0.map(|v| v as i32)
+        }
+        #[inline(always)]
+        pub(crate) fn lane(self, i: usize) -> f32 {
+            self.0[i]
+        }
+    }
+}
+
+pub(crate) use imp::F4;
+
+#[cfg(test)]
+mod tests {
+    use super::F4;
+
+    #[test]
+    fn lanes() {
+        let a = F4::new(1.0, 2.0, 3.0, 4.0);
+        let b = F4::new(4.0, 1.0, 5.0, -1.0);
+        assert_eq!(a.min(b).to_array(), [1.0, 1.0, 3.0, -1.0]);
+        assert_eq!(a.max(b).to_array(), [4.0, 2.0, 5.0, 4.0]);
+        assert_eq!(a.add(b).sub(b).to_array(), a.to_array());
+        assert_eq!(a.xyz0().to_array(), [1.0, 2.0, 3.0, 0.0]);
+        assert_eq!(a.half_area(), 1.0 * 2.0 + 2.0 * 3.0 + 3.0 * 1.0);
+        assert_eq!(F4::select(F4::mask(true), a, b).to_array(), a.to_array());
+        assert_eq!(F4::select(F4::mask(false), a, b).to_array(), b.to_array());
+        assert_eq!(F4::new(0.5, 1.9, 7.0, 0.0).to_i32(), [0, 1, 7, 0]);
+    }
+}
