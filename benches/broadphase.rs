@@ -9,7 +9,7 @@
 //! the number of steps printed for ms per step.
 
 use canopy::rapier::CanopyBroadPhase;
-use canopy::scenes::harness::{replay, Recorder, RecordedUpdate};
+use canopy::scenes::harness::{replay, RecordedUpdate, Recorder};
 use canopy::scenes::{scene, Size, World, SCENE_NAMES};
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use rapier3d::geometry::{BroadPhase, BroadPhaseBvh};
@@ -37,7 +37,10 @@ fn primed<B: BroadPhase>(mut bp: B, first: &RecordedUpdate) -> B {
 }
 
 fn bench_scenes(c: &mut Criterion) {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool");
     let filter: Option<String> = std::env::args().skip(1).find(|a| !a.starts_with('-'));
     for &name in SCENE_NAMES {
         if let Some(f) = &filter {
@@ -47,12 +50,21 @@ fn bench_scenes(c: &mut Criterion) {
         }
         let updates = record(name);
         let (first, rest) = updates.split_first().expect("at least one update");
-        println!("broadphase/{name}: {} timed steps per iteration", rest.len());
+        println!(
+            "broadphase/{name}: {} timed steps per iteration",
+            rest.len()
+        );
         let mut g = c.benchmark_group(format!("broadphase/{name}"));
-        g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(4));
+        g.sample_size(10)
+            .warm_up_time(Duration::from_secs(1))
+            .measurement_time(Duration::from_secs(4));
         let rapier = primed(BroadPhaseBvh::new(), first);
         g.bench_function("rapier", |b| {
-            b.iter_batched(|| rapier.clone(), |mut bp| replay(&mut bp, rest), BatchSize::LargeInput)
+            b.iter_batched(
+                || rapier.clone(),
+                |mut bp| replay(&mut bp, rest),
+                BatchSize::LargeInput,
+            )
         });
         let canopy = pool.install(|| primed(CanopyBroadPhase::new(), first));
         g.bench_function("canopy", |b| {

@@ -16,7 +16,11 @@ fn main() {
     let name = args.first().map(String::as_str).unwrap_or("balls");
     let which = args.get(1).map(String::as_str).unwrap_or("canopy");
     let steps: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(40);
-    let size = if args.get(3).map(String::as_str) == Some("small") { Size::Small } else { Size::Full };
+    let size = if args.get(3).map(String::as_str) == Some("small") {
+        Size::Small
+    } else {
+        Size::Full
+    };
     let Some(s) = scene(name, size) else {
         eprintln!("unknown scene {name}");
         std::process::exit(2);
@@ -29,10 +33,20 @@ fn main() {
         "rapier" => Box::new(BroadPhaseBvh::new()),
         _ => Box::new(CanopyBroadPhase::new()),
     };
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool");
     pool.install(|| {
         let mut events = Vec::new();
-        bp.update(&first.params, &first.colliders, &first.bodies, &first.modified, &first.removed, &mut events);
+        bp.update(
+            &first.params,
+            &first.colliders,
+            &first.bodies,
+            &first.modified,
+            &first.removed,
+            &mut events,
+        );
         let t = Instant::now();
         let events = replay(bp.as_mut(), rest);
         let secs = t.elapsed().as_secs_f64();

@@ -26,7 +26,7 @@ const PARALLEL_THRESHOLD: usize = 4096;
 const MAX_SAH_DEPTH: u32 = 64;
 const MAX_BINS: usize = 32;
 /// Nodes of at most this many primitives try every split along every axis.
-const SMALL: usize = 8;
+const SMALL: usize = 16;
 
 /// A primitive reference: lanes 0..3 of `min`/`max` hold the box, `min[3]` the primitive
 /// index's bits, `max[3]` zero.
@@ -88,11 +88,6 @@ impl Box4 {
         self.grow(o.lo, o.hi);
     }
 
-    /// Half the surface area, with coordinates multiplied by `scale` (see [`area_scale`]).
-    #[inline(always)]
-    fn half_area(&self, scale: F4) -> f32 {
-        self.hi.mul(scale).sub(self.lo.mul(scale)).half_area()
-    }
 
     fn min3(&self) -> [f32; 3] {
         let a = self.lo.to_array();
@@ -118,20 +113,59 @@ impl Box4 {
     }
 }
 
-/// Multiplier of coordinates in the area computations of a node with bounds `b`: half of one
-/// over the largest extent, so that every box inside `b` has scaled extents of at most 1 and
-/// nothing overflows, even for boxes near `f32::MAX`.
-#[inline(always)]
-fn area_scale(b: &Box4) -> F4 {
-    let h = F4::splat(0.5);
-    let e = b.hi.mul(h).sub(b.lo.mul(h)).to_array();
-    let m = e[0].max(e[1]).max(e[2]);
-    let s = if m > 0.0 { 0.5 / m } else { 1.0 };
-    let s = if s.is_finite() { s } else { 1.0 };
-    F4::splat(s)
+/// How the builder measures areas: half surface areas of extents multiplied by `scale`, one
+/// over the largest extent of the root, so that every scaled extent is at most 1 and no cost
+/// overflows. When the root's extent itself overflows (`huge`, boxes near `f32::MAX`), extents
+/// are taken of halved coordinates.
+#[derive(Clone, Copy)]
+struct AreaScale {
+    scale: F4,
+    huge: bool,
+}
+
+impl AreaScale {
+    fn for_root(b: &Box4) -> AreaScale {
+        let e = b.hi.sub(b.lo).to_array();
+        let m = e[0].max(e[1]).max(e[2]);
+        if m.is_finite() {
+            let s = if m > 0.0 { 1.0 / m } else { 1.0 };
+            let s = if s.is_finite() { s } else { 1.0 };
+            return AreaScale {
+                scale: F4::splat(s),
+                huge: false,
+            };
+        }
+        let h = F4::splat(0.5);
+        let e = b.hi.mul(h).sub(b.lo.mul(h)).to_array();
+        let m = e[0].max(e[1]).max(e[2]);
+        AreaScale {
+            scale: F4::splat(1.0 / m),
+            huge: true,
+        }
+    }
+
+    /// Scaled half surface area of the box `[lo, hi]`.
+    #[inline(always)]
+    fn of(&self, lo: F4, hi: F4) -> f32 {
+        let e = if self.huge {
+            let h = F4::splat(0.5);
+            hi.mul(h).sub(lo.mul(h))
+        } else {
+            hi.sub(lo)
+        };
+        e.mul(self.scale).half_area()
+    }
+
+    #[inline(always)]
+    fn of_box(&self, b: &Box4) -> f32 {
+        self.of(b.lo, b.hi)
+    }
 }
 
 struct Ctx {
+    area: AreaScale,
+    small: usize,
+    binfn: usize,
     bins: usize,
     max_leaf: usize,
     c_trav: f32,
@@ -238,6 +272,9 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
     ];
     let (bounds, cbounds) = Box4::of_refs(&refs);
     let ctx = Ctx {
+        area: AreaScale::for_root(&bounds),
+        small: std::env::var("SMALL").ok().and_then(|v| v.parse().ok()).unwrap_or(8),
+        binfn: std::env::var("BINFN").ok().and_then(|v| v.parse().ok()).unwrap_or(0),
         bins: options.bins as usize,
         max_leaf: options.max_leaf_size as usize,
         c_trav: options.traversal_cost,
@@ -275,13 +312,12 @@ fn build_node(t: Task<'_>, b: Box4, cb: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
         let mid = median_split(t.src, &cb);
         return recurse_by_pass(t, mid, b, out, ctx);
     }
-    if n <= SMALL {
+    if n <= ctx.small {
         return small_node(t, b, out, ctx);
     }
-    let scale = area_scale(&b);
-    match find_split(t.src, &cb, scale, ctx) {
+    match find_split(t.src, &cb, ctx) {
         Some(s) => {
-            if ctx.prefers_leaf(n, b.half_area(scale), s.cost) {
+            if ctx.prefers_leaf(n, ctx.area.of_box(&b), s.cost) {
                 return t.leaf(&b, out);
             }
             let (lcb, rcb) = partition(t.src, t.dst, &cb, &s);
@@ -358,15 +394,21 @@ fn bin_coords(c: F4, k0: F4, k1: F4, last: F4) -> [i32; 4] {
 
 /// Bin count for a node of `n` primitives.
 #[inline(always)]
-fn bin_count(n: usize, max: usize) -> usize {
-    max.min(n.max(4))
+fn bin_count(n: usize, max: usize, f: usize) -> usize {
+    match f {
+        0 => max.min(n.max(4)),
+        1 => max.min((n / 2).max(4)),
+        2 => max.min((n / 4).max(4)),
+        3 => max.min(4 + 2 * (n as f32).sqrt() as usize),
+        _ => f.min(32),
+    }
 }
 
 /// Bins the centroids on every axis of non-zero extent and returns the cheapest split.
 #[inline(never)]
-fn find_split(refs: &[PrimRef], cb: &Box4, scale: F4, ctx: &Ctx) -> Option<Split> {
+fn find_split(refs: &[PrimRef], cb: &Box4, ctx: &Ctx) -> Option<Split> {
     let n = refs.len();
-    let nb = bin_count(n, ctx.bins);
+    let nb = bin_count(n, ctx.bins, ctx.binfn);
     let (k0, k1) = bin_params(cb, nb);
     let k1a = k1.to_array();
     if k1a[0] == 0.0 && k1a[1] == 0.0 && k1a[2] == 0.0 {
@@ -401,7 +443,7 @@ fn find_split(refs: &[PrimRef], cb: &Box4, scale: F4, ctx: &Ctx) -> Option<Split
         for i in (1..nb).rev() {
             acc.merge(&bins[i]);
             cnt += counts[i];
-            right_area[i] = acc.half_area(scale);
+            right_area[i] = ctx.area.of_box(&acc);
             right_count[i] = cnt;
         }
         let mut acc = Box4::empty();
@@ -413,7 +455,7 @@ fn find_split(refs: &[PrimRef], cb: &Box4, scale: F4, ctx: &Ctx) -> Option<Split
             if cnt == 0 || rc == 0 {
                 continue;
             }
-            let cost = acc.half_area(scale) * cnt as f32 + right_area[i + 1] * rc as f32;
+            let cost = ctx.area.of_box(&acc) * cnt as f32 + right_area[i + 1] * rc as f32;
             if best.is_none_or(|b| cost < b.2) {
                 best = Some((a, i, cost, cnt as usize));
             }
@@ -463,8 +505,10 @@ fn bin_params(cb: &Box4, nb: usize) -> (F4, F4) {
 #[inline(never)]
 fn partition(src: &[PrimRef], dst: &mut [PrimRef], cb: &Box4, s: &Split) -> (Box4, Box4) {
     let (k0, k1) = bin_params(cb, s.bins);
-    let last = F4::splat((s.bins - 1) as f32);
+    let (k0, k1) = (k0.lane(s.axis), k1.lane(s.axis));
+    let last = (s.bins - 1) as f32;
     let split_bin = s.bin as i32;
+    let a = s.axis;
     let inf = F4::splat(f32::INFINITY);
     let ninf = F4::splat(f32::NEG_INFINITY);
     let mut l_lo = inf;
@@ -474,7 +518,10 @@ fn partition(src: &[PrimRef], dst: &mut [PrimRef], cb: &Box4, s: &Split) -> (Box
     let (mut l, mut r) = (0usize, s.left_count);
     for e in src {
         let c = e.lo().add(e.hi());
-        let goes_left = bin_coords(c, k0, k1, last)[s.axis] <= split_bin;
+        // The same operations as `bin_coords`, on one lane: the same bin.
+        let f = (e.min[a] + e.max[a] - k0) * k1;
+        let f = if f < last { f } else { last };
+        let goes_left = (f as i32) <= split_bin;
         let pos = if goes_left { l } else { r };
         dst[pos] = *e;
         l += goes_left as usize;
@@ -496,12 +543,89 @@ fn partition(src: &[PrimRef], dst: &mut [PrimRef], cb: &Box4, s: &Split) -> (Box
     (z(l_lo, l_hi), z(r_lo, r_hi))
 }
 
-/// A node of at most [`SMALL`] references: sorts them by centroid on every axis, tries every
-/// split, and either becomes a leaf or recurses on the best split.
+/// Largest node that tries every partition of its references (`2^(n-1) - 1` of them).
+const ENUMERATE: usize = 5;
+
+/// A node of `2..=SMALL` references, split exactly: two references directly, up to
+/// [`ENUMERATE`] by trying every partition, more by sorting the references by centroid on every
+/// axis and trying every split of each order.
 fn small_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
+    match t.src.len() {
+        2 => pair_node(t, b, out, ctx),
+        n if n <= ENUMERATE => enumerate_node(t, b, out, ctx),
+        _ => sweep_node(t, b, out, ctx),
+    }
+}
+
+/// Two references: a leaf, or an interior node over two single-primitive leaves.
+fn pair_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
+    let (r0, r1) = (t.src[0], t.src[1]);
+    let cost = ctx.area.of(r0.lo(), r0.hi()) + ctx.area.of(r1.lo(), r1.hi());
+    if ctx.prefers_leaf(2, ctx.area.of_box(&b), cost) {
+        return t.leaf(&b, out);
+    }
+    let me = out.len() as u32;
+    out.push(Node::interior(b.min3(), b.max3(), me + 2));
+    for (k, r) in [r0, r1].iter().enumerate() {
+        t.idx[k] = r.index();
+        let p = PrimBounds {
+            min: [r.min[0], r.min[1], r.min[2]],
+            max: [r.max[0], r.max[1], r.max[2]],
+        };
+        t.bnd[k] = p;
+        out.push(Node::leaf(p.min, p.max, t.first + k as u32, 1));
+    }
+}
+
+/// `3..=ENUMERATE` references: the bounds of every subset (each from a smaller one), then the
+/// cheapest of all partitions into two non-empty sets.
+fn enumerate_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
+    let n = t.src.len();
+    debug_assert!((3..=ENUMERATE).contains(&n));
+    let full = (1usize << n) - 1;
+    let mut sub = [Box4::empty(); 1 << ENUMERATE];
+    let mut area = [0.0f32; 1 << ENUMERATE];
+    for m in 1..=full {
+        let r = &t.src[m.trailing_zeros() as usize];
+        let mut bm = sub[m & (m - 1)];
+        bm.grow(r.lo(), r.hi());
+        sub[m] = bm;
+        area[m] = ctx.area.of_box(&bm);
+    }
+    // The last reference always goes right, so every partition is seen once.
+    let mut best = (f32::INFINITY, 0usize);
+    for m in 1..(1usize << (n - 1)) {
+        let rm = full ^ m;
+        let cost = area[m] * m.count_ones() as f32 + area[rm] * rm.count_ones() as f32;
+        if cost < best.0 {
+            best = (cost, m);
+        }
+    }
+    let (cost, m) = best;
+    if ctx.prefers_leaf(n, area[full], cost) {
+        return t.leaf(&b, out);
+    }
+    let left = m.count_ones() as usize;
+    let (mut l, mut r) = (0, left);
+    for (k, e) in t.src.iter().enumerate() {
+        if m >> k & 1 == 1 {
+            t.dst[l] = *e;
+            l += 1;
+        } else {
+            t.dst[r] = *e;
+            r += 1;
+        }
+    }
+    let (lt, rt) = t.split(left, true);
+    let dummy = Box4::empty();
+    join(b, (lt, sub[m], dummy), (rt, sub[full ^ m], dummy), out, ctx);
+}
+
+/// `ENUMERATE+1..=SMALL` references: sorts them by centroid on every axis and tries every split
+/// of each order (an exact sweep).
+fn sweep_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     let n = t.src.len();
     debug_assert!((2..=SMALL).contains(&n));
-    let scale = area_scale(&b);
     let mut lo = [F4::splat(0.0); SMALL];
     let mut hi = [F4::splat(0.0); SMALL];
     let mut cen = [[0.0f32; SMALL]; 3];
@@ -538,14 +662,14 @@ fn small_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
         for k in (1..n).rev() {
             let o = order[k] as usize;
             acc.grow(lo[o], hi[o]);
-            right_area[k] = acc.half_area(scale);
+            right_area[k] = ctx.area.of_box(&acc);
         }
         let mut acc = Box4::empty();
         for k in 1..n {
             let o = order[k - 1] as usize;
             acc.grow(lo[o], hi[o]);
             // Left: order[..k], right: order[k..].
-            let cost = acc.half_area(scale) * k as f32 + right_area[k] * (n - k) as f32;
+            let cost = ctx.area.of_box(&acc) * k as f32 + right_area[k] * (n - k) as f32;
             if cost < best_cost {
                 best_cost = cost;
                 best_k = k;
@@ -561,7 +685,7 @@ fn small_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
         }
         return recurse_by_pass(t, n / 2, b, out, ctx);
     }
-    if ctx.prefers_leaf(n, b.half_area(scale), best_cost) {
+    if ctx.prefers_leaf(n, ctx.area.of_box(&b), best_cost) {
         return t.leaf(&b, out);
     }
     let mut best_rb = Box4::empty();
