@@ -1,14 +1,19 @@
 //! Top-down binned SAH builder (Wald 2007, "On fast construction of SAH-based bounding volume
-//! hierarchies"), with an exact sweep for small nodes.
+//! hierarchies"), with an exact search for small nodes.
 //!
-//! Primitive references (box + index, 32 bytes, four-lane vectors) live in two buffers: a node
-//! bins its references' centroids on all three axes in one pass, sweeps the bins for the
-//! cheapest split, and then partitions its references out of place into the other buffer,
-//! branch-free, computing its children's centroid bounds on the way (their boxes come from the
-//! bins). The children then work the other way round. A node of at most [`SMALL`] references
-//! sorts them on each axis instead and tries every split (exact SAH). A node becomes a leaf
+//! Primitive references (box + index, 32 bytes, four-lane vectors) live in two buffers. A node
+//! bins its references' centroids along the widest axis of its box (the next one when that gives
+//! no split) in one pass, sweeps the bins for the cheapest split, and partitions its references
+//! out of place into the other buffer without branches; its children's boxes come from the
+//! bins, and the children then work the other way round. A node of at most [`SMALL`]
+//! references tries every partition into two sets instead (exact SAH). A node becomes a leaf
 //! when no split beats `intersection_cost * n` and the leaf-size limit allows, and writes its
 //! references straight into the tree's primitive arrays.
+//!
+//! Binning one axis over the node's box (rather than three over the centroids' box) and the
+//! exact small nodes keep the trees within about a percent of a three-axis binned build, at a
+//! fraction of the cost. Areas are computed in `f32`, scaled by the root's extent so that
+//! nothing overflows.
 //!
 //! The two halves of large nodes are built with `rayon::join` on disjoint halves of every
 //! buffer; the tree does not depend on the thread count. Below the depth limit a node whose
@@ -25,8 +30,10 @@ const PARALLEL_THRESHOLD: usize = 4096;
 /// Past this depth, nodes split at the object median (the tree then ends within 32 levels).
 const MAX_SAH_DEPTH: u32 = 64;
 const MAX_BINS: usize = 32;
-/// Nodes of at most this many primitives try every split along every axis.
-const SMALL: usize = 16;
+/// Nodes with at least this many primitives bin into two sets of bins.
+const TWO_BIN_SETS: usize = 64;
+/// Nodes of at most this many primitives try every partition into two sets (at most 15).
+const SMALL: usize = 5;
 
 /// A primitive reference: lanes 0..3 of `min`/`max` hold the box, `min[3]` the primitive
 /// index's bits, `max[3]` zero.
@@ -88,7 +95,6 @@ impl Box4 {
         self.grow(o.lo, o.hi);
     }
 
-
     fn min3(&self) -> [f32; 3] {
         let a = self.lo.to_array();
         [a[0], a[1], a[2]]
@@ -99,17 +105,13 @@ impl Box4 {
         [a[0], a[1], a[2]]
     }
 
-    /// Bounds (and centroid bounds, centroids doubled: `min + max`) of `refs`.
-    fn of_refs(refs: &[PrimRef]) -> (Box4, Box4) {
+    /// Bounds of `refs`.
+    fn of_refs(refs: &[PrimRef]) -> Box4 {
         let mut b = Box4::empty();
-        let mut cb = Box4::empty();
         for r in refs {
-            let (lo, hi) = (r.lo(), r.hi());
-            b.grow(lo, hi);
-            let c = lo.add(hi);
-            cb.grow(c, c);
+            b.grow(r.lo(), r.hi());
         }
-        (b, cb)
+        b
     }
 }
 
@@ -164,8 +166,6 @@ impl AreaScale {
 
 struct Ctx {
     area: AreaScale,
-    small: usize,
-    binfn: usize,
     bins: usize,
     max_leaf: usize,
     c_trav: f32,
@@ -270,18 +270,16 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
         };
         n
     ];
-    let (bounds, cbounds) = Box4::of_refs(&refs);
+    let bounds = Box4::of_refs(&refs);
     let ctx = Ctx {
         area: AreaScale::for_root(&bounds),
-        small: std::env::var("SMALL").ok().and_then(|v| v.parse().ok()).unwrap_or(8),
-        binfn: std::env::var("BINFN").ok().and_then(|v| v.parse().ok()).unwrap_or(0),
         bins: options.bins as usize,
         max_leaf: options.max_leaf_size as usize,
         c_trav: options.traversal_cost,
         c_isect: options.intersection_cost,
         parallel: options.parallel,
     };
-    let mut nodes = Vec::with_capacity(2 * n / options.max_leaf_size.max(1) as usize + 1);
+    let mut nodes = Vec::with_capacity(2 * n);
     let task = Task {
         src: &mut refs,
         dst: &mut scratch,
@@ -290,7 +288,7 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
         first: 0,
         depth: 0,
     };
-    build_node(task, bounds, cbounds, &mut nodes, &ctx);
+    build_node(task, bounds, &mut nodes, &ctx);
     Bvh {
         nodes,
         prim_indices,
@@ -299,8 +297,8 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
     }
 }
 
-/// Builds the subtree of `t` (bounds `b`, doubled-centroid bounds `cb`) at the end of `out`.
-fn build_node(t: Task<'_>, b: Box4, cb: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
+/// Builds the subtree of `t` (bounds `b`) at the end of `out`.
+fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     let n = t.src.len();
     if n == 1 {
         return t.leaf(&b, out);
@@ -309,20 +307,20 @@ fn build_node(t: Task<'_>, b: Box4, cb: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
         if n <= ctx.max_leaf {
             return t.leaf(&b, out);
         }
-        let mid = median_split(t.src, &cb);
+        let mid = median_split(t.src, &b);
         return recurse_by_pass(t, mid, b, out, ctx);
     }
-    if n <= ctx.small {
+    if n <= SMALL {
         return small_node(t, b, out, ctx);
     }
-    match find_split(t.src, &cb, ctx) {
+    match find_split(t.src, &b, ctx) {
         Some(s) => {
             if ctx.prefers_leaf(n, ctx.area.of_box(&b), s.cost) {
                 return t.leaf(&b, out);
             }
-            let (lcb, rcb) = partition(t.src, t.dst, &cb, &s);
+            partition(t.src, t.dst, &s);
             let (lt, rt) = t.split(s.left_count, true);
-            join(b, (lt, s.left, lcb), (rt, s.right, rcb), out, ctx);
+            join(b, (lt, s.left), (rt, s.right), out, ctx);
         }
         None if n > ctx.max_leaf => {
             // Every centroid is the same point: split in the middle.
@@ -335,17 +333,17 @@ fn build_node(t: Task<'_>, b: Box4, cb: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
 /// Recurses into `..mid` and `mid..` of `t.src` (in place), computing the children's bounds
 /// with one pass over the references.
 fn recurse_by_pass(t: Task<'_>, mid: usize, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
-    let (lb, lcb) = Box4::of_refs(&t.src[..mid]);
-    let (rb, rcb) = Box4::of_refs(&t.src[mid..]);
+    let lb = Box4::of_refs(&t.src[..mid]);
+    let rb = Box4::of_refs(&t.src[mid..]);
     let (lt, rt) = t.split(mid, false);
-    join(b, (lt, lb, lcb), (rt, rb, rcb), out, ctx);
+    join(b, (lt, lb), (rt, rb), out, ctx);
 }
 
 /// Writes an interior node of bounds `b` with the two given subtrees.
 fn join(
     b: Box4,
-    (lt, lb, lcb): (Task<'_>, Box4, Box4),
-    (rt, rb, rcb): (Task<'_>, Box4, Box4),
+    (lt, lb): (Task<'_>, Box4),
+    (rt, rb): (Task<'_>, Box4),
     out: &mut Vec<Node>,
     ctx: &Ctx,
 ) {
@@ -355,29 +353,71 @@ fn join(
     let right_index = if ctx.parallel && n >= PARALLEL_THRESHOLD {
         let cap = 2 * rt.src.len() / ctx.max_leaf + 1;
         let ((), right_nodes) = rayon::join(
-            || build_node(lt, lb, lcb, out, ctx),
+            || build_node(lt, lb, out, ctx),
             || {
                 let mut v = Vec::with_capacity(cap);
-                build_node(rt, rb, rcb, &mut v, ctx);
+                build_node(rt, rb, &mut v, ctx);
                 v
             },
         );
         append_subtree(out, right_nodes)
     } else {
-        build_node(lt, lb, lcb, out, ctx);
+        build_node(lt, lb, out, ctx);
         let r = out.len() as u32;
-        build_node(rt, rb, rcb, out, ctx);
+        build_node(rt, rb, out, ctx);
         r
     };
     out[me].first = right_index;
 }
 
+/// Binning of one axis: a reference goes to bin `(min + max - k0) * k1`, clamped to
+/// `0..=last`. The same function classifies references in [`partition`], so the counts of the
+/// bins are exactly the sizes of the children.
+#[derive(Clone, Copy)]
+struct Binning {
+    axis: usize,
+    k0: f32,
+    k1: f32,
+    last: f32,
+}
+
+impl Binning {
+    /// Binning of `axis` over the node bounds `b` with `nb` bins; `None` when the axis has no
+    /// extent to bin (or too small a one).
+    #[inline(always)]
+    fn new(b: &Box4, axis: usize, nb: usize) -> Option<Binning> {
+        // Doubled centroids `min + max` lie in `[2 b.min, 2 b.max]`.
+        let (lo, hi) = (b.lo.lane(axis) * 2.0, b.hi.lane(axis) * 2.0);
+        let e = hi - lo;
+        if e.is_nan() || e <= 0.0 {
+            return None;
+        }
+        // Slightly below `nb / extent` so the largest centroid lands in the last bin.
+        let k1 = (nb as f32 * (1.0 - 1e-6)) / e;
+        (k1.is_finite() && k1 > 0.0).then_some(Binning {
+            axis,
+            k0: lo,
+            k1,
+            last: (nb - 1) as f32,
+        })
+    }
+
+    #[inline(always)]
+    fn bin(&self, r: &PrimRef) -> usize {
+        let f = (r.min[self.axis] + r.max[self.axis] - self.k0) * self.k1;
+        // NaN (from infinite sums near f32::MAX) goes to the last bin.
+        let f = if f < self.last { f } else { self.last };
+        let f = if f > 0.0 { f } else { 0.0 };
+        // SAFETY: `f` is finite and in `0..=last`, and `last < MAX_BINS`.
+        unsafe { f.to_int_unchecked::<u32>() as usize }
+    }
+}
+
 /// The chosen split of a binned node.
 struct Split {
-    axis: usize,
+    binning: Binning,
     /// References in bins `0..=bin` go left.
     bin: usize,
-    bins: usize,
     /// Sum over the children of half-area (scaled) times primitive count.
     cost: f32,
     left_count: usize,
@@ -385,86 +425,101 @@ struct Split {
     right: Box4,
 }
 
-/// Bin positions of the doubled centroid `c`: `(c - k0) * k1` clamped to the last bin.
+/// Bin count for a node of `n` primitives: the option, but no more bins than primitives.
 #[inline(always)]
-fn bin_coords(c: F4, k0: F4, k1: F4, last: F4) -> [i32; 4] {
-    // `c >= k0` (k0 is the smallest doubled centroid), so only the top needs clamping.
-    c.sub(k0).mul(k1).min(last).to_i32()
+fn bin_count(n: usize, max: usize) -> usize {
+    max.min(n.max(2))
 }
 
-/// Bin count for a node of `n` primitives.
-#[inline(always)]
-fn bin_count(n: usize, max: usize, f: usize) -> usize {
-    match f {
-        0 => max.min(n.max(4)),
-        1 => max.min((n / 2).max(4)),
-        2 => max.min((n / 4).max(4)),
-        3 => max.min(4 + 2 * (n as f32).sqrt() as usize),
-        _ => f.min(32),
-    }
-}
-
-/// Bins the centroids on every axis of non-zero extent and returns the cheapest split.
+/// Bins the centroids along the widest axis of `b` (the next widest when that gives no
+/// split) and returns the cheapest split.
 #[inline(never)]
-fn find_split(refs: &[PrimRef], cb: &Box4, ctx: &Ctx) -> Option<Split> {
-    let n = refs.len();
-    let nb = bin_count(n, ctx.bins, ctx.binfn);
-    let (k0, k1) = bin_params(cb, nb);
-    let k1a = k1.to_array();
-    if k1a[0] == 0.0 && k1a[1] == 0.0 && k1a[2] == 0.0 {
-        return None;
+fn find_split(refs: &[PrimRef], b: &Box4, ctx: &Ctx) -> Option<Split> {
+    let nb = bin_count(refs.len(), ctx.bins);
+    let e = b.hi.sub(b.lo).to_array();
+    // Axes by decreasing extent.
+    let (mut a0, mut a1, mut a2) = (0usize, 1usize, 2usize);
+    if e[a1] > e[a0] {
+        std::mem::swap(&mut a0, &mut a1);
     }
-    let last = F4::splat((nb - 1) as f32);
+    if e[a2] > e[a1] {
+        std::mem::swap(&mut a1, &mut a2);
+        if e[a1] > e[a0] {
+            std::mem::swap(&mut a0, &mut a1);
+        }
+    }
+    let axes = [a0, a1, a2];
+    axes.iter()
+        .find_map(|&a| Binning::new(b, a, nb).and_then(|bn| split_axis(refs, bn, nb, ctx)))
+}
 
-    let empty = Box4::empty();
-    let mut bins = [[empty; MAX_BINS]; 3];
-    let mut counts = [[0u32; MAX_BINS]; 3];
-    for r in refs {
-        let (lo, hi) = (r.lo(), r.hi());
-        let j = bin_coords(lo.add(hi), k0, k1, last);
-        for a in 0..3 {
-            let j = j[a] as usize & (MAX_BINS - 1);
-            bins[a][j].grow(lo, hi);
-            counts[a][j] += 1;
+/// Bins `refs` with `bn` and sweeps the bins for the cheapest split.
+#[inline(always)]
+fn split_axis(refs: &[PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option<Split> {
+    let mut bins = [Box4::empty(); MAX_BINS];
+    let mut counts = [0u32; MAX_BINS];
+    if refs.len() >= TWO_BIN_SETS {
+        // Even and odd references in separate bins, so that consecutive references in one bin
+        // do not wait for each other's update.
+        let mut bins2 = [Box4::empty(); MAX_BINS];
+        let mut counts2 = [0u32; MAX_BINS];
+        let mut pairs = refs.chunks_exact(2);
+        for p in &mut pairs {
+            let (r0, r1) = (&p[0], &p[1]);
+            let j0 = bn.bin(r0) & (MAX_BINS - 1);
+            let j1 = bn.bin(r1) & (MAX_BINS - 1);
+            bins[j0].grow(r0.lo(), r0.hi());
+            counts[j0] += 1;
+            bins2[j1].grow(r1.lo(), r1.hi());
+            counts2[j1] += 1;
+        }
+        for r in pairs.remainder() {
+            let j = bn.bin(r) & (MAX_BINS - 1);
+            bins[j].grow(r.lo(), r.hi());
+            counts[j] += 1;
+        }
+        for i in 0..nb {
+            bins[i].merge(&bins2[i]);
+            counts[i] += counts2[i];
+        }
+    } else {
+        for r in refs {
+            let j = bn.bin(r) & (MAX_BINS - 1);
+            bins[j].grow(r.lo(), r.hi());
+            counts[j] += 1;
         }
     }
 
-    let mut best: Option<(usize, usize, f32, usize)> = None;
     let mut right_area = [0.0f32; MAX_BINS];
     let mut right_count = [0u32; MAX_BINS];
-    for a in 0..3 {
-        if k1a[a] == 0.0 {
+    // right_*[i]: bins i..nb.
+    let mut acc = Box4::empty();
+    let mut cnt = 0u32;
+    for i in (1..nb).rev() {
+        acc.merge(&bins[i]);
+        cnt += counts[i];
+        right_area[i] = ctx.area.of_box(&acc);
+        right_count[i] = cnt;
+    }
+    let mut best: Option<(usize, f32, usize)> = None;
+    let mut acc = Box4::empty();
+    let mut cnt = 0u32;
+    for i in 0..nb - 1 {
+        acc.merge(&bins[i]);
+        cnt += counts[i];
+        let rc = right_count[i + 1];
+        if cnt == 0 || rc == 0 {
             continue;
         }
-        let (bins, counts) = (&bins[a], &counts[a]);
-        // right_*[i]: bins i..nb.
-        let mut acc = Box4::empty();
-        let mut cnt = 0u32;
-        for i in (1..nb).rev() {
-            acc.merge(&bins[i]);
-            cnt += counts[i];
-            right_area[i] = ctx.area.of_box(&acc);
-            right_count[i] = cnt;
-        }
-        let mut acc = Box4::empty();
-        let mut cnt = 0u32;
-        for i in 0..nb - 1 {
-            acc.merge(&bins[i]);
-            cnt += counts[i];
-            let rc = right_count[i + 1];
-            if cnt == 0 || rc == 0 {
-                continue;
-            }
-            let cost = ctx.area.of_box(&acc) * cnt as f32 + right_area[i + 1] * rc as f32;
-            if best.is_none_or(|b| cost < b.2) {
-                best = Some((a, i, cost, cnt as usize));
-            }
+        let cost = ctx.area.of_box(&acc) * cnt as f32 + right_area[i + 1] * rc as f32;
+        if best.is_none_or(|b| cost < b.1) {
+            best = Some((i, cost, cnt as usize));
         }
     }
-    let (axis, bin, cost, left_count) = best?;
+    let (bin, cost, left_count) = best?;
     let mut left = Box4::empty();
     let mut right = Box4::empty();
-    for (i, bin_box) in bins[axis].iter().enumerate().take(nb) {
+    for (i, bin_box) in bins.iter().enumerate().take(nb) {
         if i <= bin {
             left.merge(bin_box);
         } else {
@@ -472,9 +527,8 @@ fn find_split(refs: &[PrimRef], cb: &Box4, ctx: &Ctx) -> Option<Split> {
         }
     }
     Some(Split {
-        axis,
+        binning: bn,
         bin,
-        bins: nb,
         cost,
         left_count,
         left,
@@ -482,78 +536,30 @@ fn find_split(refs: &[PrimRef], cb: &Box4, ctx: &Ctx) -> Option<Split> {
     })
 }
 
-/// Binning offsets and scales for doubled-centroid bounds `cb` and `nb` bins; the scale is 0
-/// on axes of zero extent (or too small an extent to bin).
-#[inline(always)]
-fn bin_params(cb: &Box4, nb: usize) -> (F4, F4) {
-    let e = cb.hi.sub(cb.lo).to_array();
-    let mut k1 = [0.0f32; 4];
-    for a in 0..3 {
-        if e[a] > 0.0 {
-            // Slightly below `nb / extent` so the largest centroid lands in the last bin.
-            let s = (nb as f32 * (1.0 - 1e-6)) / e[a];
-            if s.is_finite() {
-                k1[a] = s;
-            }
-        }
-    }
-    (cb.lo, F4::new(k1[0], k1[1], k1[2], 0.0))
-}
-
-/// Partitions `src` into `dst` (references in bins `0..=split.bin` first, order kept) and
-/// returns the doubled-centroid bounds of both sides.
+/// Partitions `src` into `dst`: references in bins `0..=s.bin` first, order kept.
 #[inline(never)]
-fn partition(src: &[PrimRef], dst: &mut [PrimRef], cb: &Box4, s: &Split) -> (Box4, Box4) {
-    let (k0, k1) = bin_params(cb, s.bins);
-    let (k0, k1) = (k0.lane(s.axis), k1.lane(s.axis));
-    let last = (s.bins - 1) as f32;
-    let split_bin = s.bin as i32;
-    let a = s.axis;
-    let inf = F4::splat(f32::INFINITY);
-    let ninf = F4::splat(f32::NEG_INFINITY);
-    let mut l_lo = inf;
-    let mut l_hi = ninf;
-    let mut r_lo = inf;
-    let mut r_hi = ninf;
+fn partition(src: &[PrimRef], dst: &mut [PrimRef], s: &Split) {
     let (mut l, mut r) = (0usize, s.left_count);
     for e in src {
-        let c = e.lo().add(e.hi());
-        // The same operations as `bin_coords`, on one lane: the same bin.
-        let f = (e.min[a] + e.max[a] - k0) * k1;
-        let f = if f < last { f } else { last };
-        let goes_left = (f as i32) <= split_bin;
+        let goes_left = s.binning.bin(e) <= s.bin;
         let pos = if goes_left { l } else { r };
         dst[pos] = *e;
         l += goes_left as usize;
         r += !goes_left as usize;
-        let m = F4::mask(goes_left);
-        l_lo = l_lo.min(F4::select(m, c, inf));
-        l_hi = l_hi.max(F4::select(m, c, ninf));
-        r_lo = r_lo.min(F4::select(m, inf, c));
-        r_hi = r_hi.max(F4::select(m, ninf, c));
     }
     assert!(
         l == s.left_count && r == src.len(),
         "partition disagrees with the bins"
     );
-    let z = |lo: F4, hi: F4| Box4 {
-        lo: lo.xyz0(),
-        hi: hi.xyz0(),
-    };
-    (z(l_lo, l_hi), z(r_lo, r_hi))
 }
 
-/// Largest node that tries every partition of its references (`2^(n-1) - 1` of them).
-const ENUMERATE: usize = 5;
-
-/// A node of `2..=SMALL` references, split exactly: two references directly, up to
-/// [`ENUMERATE`] by trying every partition, more by sorting the references by centroid on every
-/// axis and trying every split of each order.
+/// A node of `2..=SMALL` references, split exactly: two references directly, more by trying
+/// every partition.
 fn small_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
-    match t.src.len() {
-        2 => pair_node(t, b, out, ctx),
-        n if n <= ENUMERATE => enumerate_node(t, b, out, ctx),
-        _ => sweep_node(t, b, out, ctx),
+    if t.src.len() == 2 {
+        pair_node(t, b, out, ctx)
+    } else {
+        enumerate_node(t, b, out, ctx)
     }
 }
 
@@ -577,14 +583,14 @@ fn pair_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     }
 }
 
-/// `3..=ENUMERATE` references: the bounds of every subset (each from a smaller one), then the
+/// `3..=SMALL` references: the bounds of every subset (each from a smaller one), then the
 /// cheapest of all partitions into two non-empty sets.
 fn enumerate_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     let n = t.src.len();
-    debug_assert!((3..=ENUMERATE).contains(&n));
+    debug_assert!((3..=SMALL).contains(&n));
     let full = (1usize << n) - 1;
-    let mut sub = [Box4::empty(); 1 << ENUMERATE];
-    let mut area = [0.0f32; 1 << ENUMERATE];
+    let mut sub = [Box4::empty(); 1 << SMALL];
+    let mut area = [0.0f32; 1 << SMALL];
     for m in 1..=full {
         let r = &t.src[m.trailing_zeros() as usize];
         let mut bm = sub[m & (m - 1)];
@@ -617,100 +623,18 @@ fn enumerate_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
         }
     }
     let (lt, rt) = t.split(left, true);
-    let dummy = Box4::empty();
-    join(b, (lt, sub[m], dummy), (rt, sub[full ^ m], dummy), out, ctx);
+    join(b, (lt, sub[m]), (rt, sub[full ^ m]), out, ctx);
 }
 
-/// `ENUMERATE+1..=SMALL` references: sorts them by centroid on every axis and tries every split
-/// of each order (an exact sweep).
-fn sweep_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
-    let n = t.src.len();
-    debug_assert!((2..=SMALL).contains(&n));
-    let mut lo = [F4::splat(0.0); SMALL];
-    let mut hi = [F4::splat(0.0); SMALL];
-    let mut cen = [[0.0f32; SMALL]; 3];
-    for (i, r) in t.src.iter().enumerate() {
-        lo[i] = r.lo();
-        hi[i] = r.hi();
-        let c = lo[i].add(hi[i]).to_array();
-        for a in 0..3 {
-            cen[a][i] = c[a];
-        }
-    }
-
-    let mut best_cost = f32::INFINITY;
-    let mut best_order = [0u8; SMALL];
-    let mut best_k = 0usize;
-    let mut best_lb = Box4::empty();
-    let mut right_area = [0.0f32; SMALL];
-    for cen in &cen {
-        // Insertion sort of the indices by centroid (stable: ties keep reference order).
-        let mut order = [0u8; SMALL];
-        for i in 0..n {
-            let key = cen[i];
-            let mut j = i;
-            while j > 0 && cen[order[j - 1] as usize] > key {
-                order[j] = order[j - 1];
-                j -= 1;
-            }
-            order[j] = i as u8;
-        }
-        if cen[order[0] as usize] == cen[order[n - 1] as usize] {
-            continue; // every centroid at one coordinate: no split on this axis
-        }
-        let mut acc = Box4::empty();
-        for k in (1..n).rev() {
-            let o = order[k] as usize;
-            acc.grow(lo[o], hi[o]);
-            right_area[k] = ctx.area.of_box(&acc);
-        }
-        let mut acc = Box4::empty();
-        for k in 1..n {
-            let o = order[k - 1] as usize;
-            acc.grow(lo[o], hi[o]);
-            // Left: order[..k], right: order[k..].
-            let cost = ctx.area.of_box(&acc) * k as f32 + right_area[k] * (n - k) as f32;
-            if cost < best_cost {
-                best_cost = cost;
-                best_k = k;
-                best_order = order;
-                best_lb = acc;
-            }
-        }
-    }
-    if best_k == 0 {
-        // All centroids coincide.
-        if n <= ctx.max_leaf {
-            return t.leaf(&b, out);
-        }
-        return recurse_by_pass(t, n / 2, b, out, ctx);
-    }
-    if ctx.prefers_leaf(n, ctx.area.of_box(&b), best_cost) {
-        return t.leaf(&b, out);
-    }
-    let mut best_rb = Box4::empty();
-    for &o in &best_order[best_k..n] {
-        best_rb.grow(lo[o as usize], hi[o as usize]);
-    }
-    for (d, &o) in t.dst.iter_mut().zip(&best_order[..n]) {
-        *d = t.src[o as usize];
-    }
-    let (lt, rt) = t.split(best_k, true);
-    let dummy = Box4::empty();
-    join(b, (lt, best_lb, dummy), (rt, best_rb, dummy), out, ctx);
-}
-
-/// Splits at the object median along the widest centroid axis (or at the middle index when all
-/// centroids coincide); always returns `1..n`.
-fn median_split(refs: &mut [PrimRef], cb: &Box4) -> usize {
+/// Splits at the object median along the widest axis of the bounds `b` (or at the middle
+/// index when all centroids coincide); always returns `1..n`.
+fn median_split(refs: &mut [PrimRef], b: &Box4) -> usize {
     let mid = refs.len() / 2;
-    let e = cb.hi.sub(cb.lo).to_array();
+    let e = b.hi.sub(b.lo).to_array();
     let axis = (0..3).max_by(|&x, &y| e[x].total_cmp(&e[y])).unwrap_or(0);
-    if e[axis] > 0.0 {
-        let key = |r: &PrimRef| r.min[axis] * 0.5 + r.max[axis] * 0.5;
-        refs.select_nth_unstable_by(mid, |p, q| {
-            key(p).total_cmp(&key(q)).then(p.index().cmp(&q.index()))
-        });
-    }
+    let key = |r: &PrimRef| r.min[axis] * 0.5 + r.max[axis] * 0.5;
+    refs.select_nth_unstable_by(mid, |p, q| {
+        key(p).total_cmp(&key(q)).then(p.index().cmp(&q.index()))
+    });
     mid
 }
