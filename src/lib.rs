@@ -7,6 +7,9 @@
 //! * [`rapier`] (`canopy-rapier`): `CanopyBroadPhase`, a drop-in `rapier3d` broadphase.
 //! * [`scenes`] (`canopy-scenes`): the standard scenes and the measuring harness used by the
 //!   examples, tests and benchmarks.
+//! * [`parry`] (`canopy-parry`): `CollisionWorld`, collision detection for parry3d users:
+//!   canopy-core broad phase, parry contact manifolds, triangle-mesh pruning, deformable
+//!   self-collision.
 //!
 //! ```
 //! use canopy::core::{Aabb, Bvh, BuildOptions};
@@ -18,6 +21,7 @@
 #![deny(missing_docs)]
 
 pub use canopy_core as core;
+pub use canopy_parry as parry;
 pub use canopy_rapier as rapier;
 pub use canopy_scenes as scenes;
 pub use rapier3d;

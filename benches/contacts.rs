@@ -1,0 +1,4 @@
+//! Placeholder: the contacts benchmark (canopy-parry world vs brute-force parry) is being
+//! written.
+
+fn main() {}

@@ -1,0 +1,130 @@
+//! The truth the world is tested and benchmarked against: parry called on every pair, fresh
+//! (no manifold or workspace carried over), without any broad phase.
+
+use nalgebra::{Isometry3, Point3};
+use parry3d::query::{DefaultQueryDispatcher, PersistentQueryDispatcher};
+use parry3d::shape::{Shape, SharedShape};
+use rayon::prelude::*;
+
+use crate::pair::Manifold;
+use crate::self_contact::{adjacent, triangle_pair_manifold};
+
+/// A pair `(i, j)`, `i < j`, of objects with at least one contact point, and its manifolds.
+pub type TruthPair = (usize, usize, Vec<Manifold>);
+
+/// `DefaultQueryDispatcher.contact_manifolds(pose_i⁻¹·pose_j, shape_i, shape_j, prediction)`
+/// called fresh on pair `(i, j)`: its manifolds when some has a point.
+pub fn pair(
+    objects: &[(Isometry3<f32>, SharedShape)],
+    i: usize,
+    j: usize,
+    prediction: f32,
+) -> Option<Vec<Manifold>> {
+    let (pose1, shape1) = &objects[i];
+    let (pose2, shape2) = &objects[j];
+    let pos12 = pose1.inv_mul(pose2);
+    let mut manifolds = Vec::new();
+    DefaultQueryDispatcher
+        .contact_manifolds(
+            &pos12,
+            &**shape1,
+            &**shape2,
+            prediction,
+            &mut manifolds,
+            &mut None,
+        )
+        .ok()?;
+    manifolds
+        .iter()
+        .any(|m| !m.points.is_empty())
+        .then_some(manifolds)
+}
+
+/// Every pair `i < j` with contact points, in order, one thread.
+pub fn contact_pairs(objects: &[(Isometry3<f32>, SharedShape)], prediction: f32) -> Vec<TruthPair> {
+    let n = objects.len();
+    (0..n)
+        .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+        .filter_map(|(i, j)| pair(objects, i, j, prediction).map(|m| (i, j, m)))
+        .collect()
+}
+
+/// [`contact_pairs`] on the current rayon pool (same result, same order).
+pub fn par_contact_pairs(
+    objects: &[(Isometry3<f32>, SharedShape)],
+    prediction: f32,
+) -> Vec<TruthPair> {
+    let n = objects.len();
+    (0..n)
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            (i + 1..n).filter_map(move |j| pair(objects, i, j, prediction).map(|m| (i, j, m)))
+        })
+        .collect()
+}
+
+/// Every pair of triangles `(t1, t2)` of two meshes (`t1` of the first) whose convex-convex
+/// manifold has a point, with its smallest point distance: all `n1 × n2` pairs through parry's
+/// `contact_manifold_convex_convex`, with the meshes' pseudo-normal constraints as parry's own
+/// mesh-mesh routine passes them.
+pub fn mesh_mesh_triangle_pairs(
+    mesh1: &parry3d::shape::TriMesh,
+    pose1: &Isometry3<f32>,
+    mesh2: &parry3d::shape::TriMesh,
+    pose2: &Isometry3<f32>,
+    prediction: f32,
+) -> Vec<(u32, u32, f32)> {
+    let pos12 = pose1.inv_mul(pose2);
+    let mut out = Vec::new();
+    for t1 in 0..mesh1.num_triangles() as u32 {
+        let tri1 = mesh1.triangle(t1);
+        let n1 = mesh1.triangle_normal_constraints(t1);
+        for t2 in 0..mesh2.num_triangles() as u32 {
+            let tri2 = mesh2.triangle(t2);
+            let n2 = mesh2.triangle_normal_constraints(t2);
+            let mut m = Manifold::with_data(t1, t2, ());
+            let ok = DefaultQueryDispatcher.contact_manifold_convex_convex(
+                &pos12,
+                &tri1,
+                &tri2,
+                n1.as_ref().map(|n| n as _),
+                n2.as_ref().map(|n| n as _),
+                prediction,
+                &mut m,
+            );
+            if ok.is_ok() {
+                if let Some(d) = crate::pair::min_distance(std::slice::from_ref(&m)) {
+                    out.push((t1, t2, d));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Every pair of triangles `t1 < t2` of one mesh that share no vertex and whose convex-convex
+/// manifold has a point within `prediction`: all `n²/2` pairs, fresh.
+pub fn self_contacts(
+    vertices: &[Point3<f32>],
+    indices: &[[u32; 3]],
+    prediction: f32,
+) -> Vec<(u32, u32, Manifold)> {
+    let n = indices.len() as u32;
+    let mut out = Vec::new();
+    for t1 in 0..n {
+        for t2 in t1 + 1..n {
+            if adjacent(&indices[t1 as usize], &indices[t2 as usize]) {
+                continue;
+            }
+            if let Some(m) = triangle_pair_manifold(vertices, indices, t1, t2, prediction) {
+                out.push((t1, t2, m));
+            }
+        }
+    }
+    out
+}
+
+/// `true` when `shape` is something parry's dispatcher handles as one convex piece.
+pub fn is_convex(shape: &dyn Shape) -> bool {
+    shape.is_convex()
+}
