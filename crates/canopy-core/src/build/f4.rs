@@ -102,6 +102,16 @@ mod imp {
         pub(crate) fn lane(self, i: usize) -> f32 {
             self.to_array()[i]
         }
+        /// Bit `i` set when lane `i` of `self` is `<=` lane `i` of `o`.
+        #[inline(always)]
+        pub(crate) fn le_bits(self, o: F4) -> u32 {
+            unsafe { _mm_movemask_ps(_mm_cmple_ps(self.0, o.0)) as u32 }
+        }
+        /// Lanes 1, 2, 3 moved down to lanes 0, 1, 2 (lane 3 keeps lane 3).
+        #[inline(always)]
+        pub(crate) fn shift_down(self) -> F4 {
+            unsafe { F4(_mm_shuffle_ps::<0b11_11_10_01>(self.0, self.0)) }
+        }
     }
 }
 
@@ -189,10 +199,50 @@ mod imp {
         pub(crate) fn lane(self, i: usize) -> f32 {
             self.0[i]
         }
+        #[inline(always)]
+        pub(crate) fn le_bits(self, o: F4) -> u32 {
+            (0..4).fold(0, |m, i| m | (((self.0[i] <= o.0[i]) as u32) << i))
+        }
+        #[inline(always)]
+        pub(crate) fn shift_down(self) -> F4 {
+            F4([self.0[1], self.0[2], self.0[3], self.0[3]])
+        }
     }
 }
 
 pub(crate) use imp::F4;
+
+use crate::bvh::{Node, PrimBounds};
+
+/// A node's box as two vectors; lane 3 holds the bits of `first` / `count` (ignore it).
+#[inline(always)]
+pub(crate) fn node_box(n: &Node) -> (F4, F4) {
+    // SAFETY: `Node` is `repr(C)`, 32 bytes: `min` and `first` in the first 16 bytes, `max` and
+    // `count` in the last 16; every bit pattern is a valid `f32`.
+    unsafe {
+        let p = n as *const Node as *const [f32; 4];
+        (F4::load4(&*p), F4::load4(&*p.add(1)))
+    }
+}
+
+/// A primitive's box as two vectors; lane 3 is junk (ignore it).
+#[inline(always)]
+pub(crate) fn prim_box(b: &PrimBounds) -> (F4, F4) {
+    // SAFETY: `PrimBounds` is `repr(C)`, six `f32`: bytes 0..16 are `min` and `max[0]`, bytes
+    // 8..24 are `min[2]` and `max`.
+    unsafe {
+        let p = b as *const PrimBounds as *const f32;
+        let lo = F4::load4(&*(p as *const [f32; 4]));
+        let hi = F4::load4(&*(p.add(2) as *const [f32; 4])).shift_down();
+        (lo, hi)
+    }
+}
+
+/// `true` when the closed boxes `[alo, ahi]` and `[blo, bhi]` overlap (lanes 0..3).
+#[inline(always)]
+pub(crate) fn overlap(alo: F4, ahi: F4, blo: F4, bhi: F4) -> bool {
+    alo.le_bits(bhi) & blo.le_bits(ahi) & 7 == 7
+}
 
 #[cfg(test)]
 mod tests {
@@ -210,5 +260,29 @@ mod tests {
         assert_eq!(F4::select(F4::mask(true), a, b).to_array(), a.to_array());
         assert_eq!(F4::select(F4::mask(false), a, b).to_array(), b.to_array());
         assert_eq!(F4::new(0.5, 1.9, 7.0, 0.0).to_i32(), [0, 1, 7, 0]);
+        assert_eq!(a.le_bits(b), 0b0101);
+        assert_eq!(a.shift_down().to_array(), [2.0, 3.0, 4.0, 4.0]);
+    }
+
+    #[test]
+    fn boxes() {
+        use super::{node_box, overlap, prim_box};
+        use crate::bvh::{Node, PrimBounds};
+        let n = Node::leaf([1.0, 2.0, 3.0], [4.0, 5.0, 6.0], 7, 1);
+        let (lo, hi) = node_box(&n);
+        assert_eq!(&lo.to_array()[..3], &[1.0, 2.0, 3.0]);
+        assert_eq!(&hi.to_array()[..3], &[4.0, 5.0, 6.0]);
+        let p = PrimBounds {
+            min: [1.0, 2.0, 3.0],
+            max: [4.0, 5.0, 6.0],
+        };
+        let (plo, phi) = prim_box(&p);
+        assert_eq!(&plo.to_array()[..3], &[1.0, 2.0, 3.0]);
+        assert_eq!(&phi.to_array()[..3], &[4.0, 5.0, 6.0]);
+        assert!(overlap(lo, hi, plo, phi));
+        let far = F4::new(4.5, 0.0, 0.0, 0.0);
+        assert!(!overlap(lo, hi, far, far));
+        let touch = F4::new(4.0, 5.0, 6.0, -1.0);
+        assert!(overlap(lo, hi, touch, touch));
     }
 }

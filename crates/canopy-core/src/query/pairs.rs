@@ -14,6 +14,7 @@
 //! moved proxy, cheaper than one query per proxy once many moved.
 
 use crate::aabb::overlaps;
+use crate::build::f4::{node_box, overlap, prim_box};
 use crate::bvh::{Bvh, Node};
 use rayon::prelude::*;
 
@@ -23,7 +24,9 @@ const PARALLEL_TASKS: usize = 256;
 
 #[inline(always)]
 fn nodes_overlap(a: &Node, b: &Node) -> bool {
-    overlaps(&a.min, &a.max, &b.min, &b.max)
+    let (alo, ahi) = node_box(a);
+    let (blo, bhi) = node_box(b);
+    overlap(alo, ahi, blo, bhi)
 }
 
 #[inline(always)]
@@ -188,6 +191,12 @@ fn leaf_task<const SELF: bool, M1: Mask, M2: Mask>(
     }
 }
 
+/// Walks task `start` depth-first and reports its pairs.
+///
+/// Tasks on the stack always hold two overlapping nodes (or a node against itself). Two
+/// interior nodes descend together (four child pairs); a leaf of one primitive against a
+/// subtree becomes a query of that primitive's box down the subtree, which tests one box
+/// against both children of every node on its way; other leaves descend the other side.
 fn walk<const SELF: bool, M1: Mask, M2: Mask>(
     t1: &Bvh,
     m1: &M1,
@@ -197,10 +206,147 @@ fn walk<const SELF: bool, M1: Mask, M2: Mask>(
     f: &mut impl FnMut(u32, u32),
 ) {
     let mut stack: Vec<Task> = Vec::with_capacity(128);
+    let mut qstack: Vec<u32> = Vec::with_capacity(64);
     stack.push(start);
-    while let Some(t) = stack.pop() {
-        if !expand::<SELF, M1, M2>(t1, m1, t2, m2, t, |c| stack.push(c)) {
-            leaf_task::<SELF, M1, M2>(t1, m1, t2, m2, t, f);
+    while let Some((a, b)) = stack.pop() {
+        let na = &t1.nodes[a as usize];
+        if SELF && a == b {
+            if na.is_leaf() {
+                leaf_task::<SELF, M1, M2>(t1, m1, t2, m2, (a, b), f);
+                continue;
+            }
+            let (l, r) = (a + 1, na.right());
+            let (ml, mr) = (m1.node(l), m1.node(r));
+            // A leaf of one primitive has no pairs of its own.
+            if mr && t1.nodes[r as usize].count != 1 {
+                stack.push((r, r));
+            }
+            if ml && t1.nodes[l as usize].count != 1 {
+                stack.push((l, l));
+            }
+            if (ml || mr) && nodes_overlap(&t1.nodes[l as usize], &t1.nodes[r as usize]) {
+                stack.push((l, r));
+            }
+            continue;
+        }
+        let nb = &t2.nodes[b as usize];
+        match (na.is_leaf(), nb.is_leaf()) {
+            (true, true) => leaf_task::<SELF, M1, M2>(t1, m1, t2, m2, (a, b), f),
+            (true, false) if na.count == 1 => {
+                let s = na.first as usize;
+                prim_query::<SELF, false, M1, M2>(t1, m1, s, t2, m2, b, &mut qstack, f);
+            }
+            (false, true) if nb.count == 1 => {
+                let s = nb.first as usize;
+                prim_query::<SELF, true, M2, M1>(t2, m2, s, t1, m1, a, &mut qstack, f);
+            }
+            (true, false) => {
+                let ma = m1.node(a);
+                let (alo, ahi) = node_box(na);
+                for c in [nb.right(), b + 1] {
+                    let (clo, chi) = node_box(&t2.nodes[c as usize]);
+                    if (ma || m2.node(c)) && overlap(alo, ahi, clo, chi) {
+                        stack.push((a, c));
+                    }
+                }
+            }
+            (false, true) => {
+                let mb = m2.node(b);
+                let (blo, bhi) = node_box(nb);
+                for c in [na.right(), a + 1] {
+                    let (clo, chi) = node_box(&t1.nodes[c as usize]);
+                    if (mb || m1.node(c)) && overlap(clo, chi, blo, bhi) {
+                        stack.push((c, b));
+                    }
+                }
+            }
+            (false, false) => {
+                let (b0, b1) = (b + 1, nb.right());
+                let (b0lo, b0hi) = node_box(&t2.nodes[b0 as usize]);
+                let (b1lo, b1hi) = node_box(&t2.nodes[b1 as usize]);
+                let (mb0, mb1) = (m2.node(b0), m2.node(b1));
+                for c in [na.right(), a + 1] {
+                    let (clo, chi) = node_box(&t1.nodes[c as usize]);
+                    let mc = m1.node(c);
+                    if (mc || mb1) && overlap(clo, chi, b1lo, b1hi) {
+                        stack.push((c, b1));
+                    }
+                    if (mc || mb0) && overlap(clo, chi, b0lo, b0hi) {
+                        stack.push((c, b0));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Reports the pairs of the primitive in slot `s` of `tp` with the primitives of the subtree
+/// `root` of `tq`. `SWAP`: `tp` is the second tree of the walk (pairs are reported first tree
+/// first). `qstack` is scratch.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn prim_query<const SELF: bool, const SWAP: bool, MP: Mask, MQ: Mask>(
+    tp: &Bvh,
+    mp: &MP,
+    s: usize,
+    tq: &Bvh,
+    mq: &MQ,
+    root: u32,
+    qstack: &mut Vec<u32>,
+    f: &mut impl FnMut(u32, u32),
+) {
+    let (plo, phi) = prim_box(&tp.prim_bounds[s]);
+    let ms = mp.slot(s);
+    let ip = tp.prim_indices[s];
+    let nodes = &tq.nodes;
+    let (rlo, rhi) = node_box(&nodes[root as usize]);
+    if !overlap(plo, phi, rlo, rhi) {
+        return;
+    }
+    qstack.clear();
+    let mut cur = root as usize;
+    loop {
+        let node = &nodes[cur];
+        if node.is_leaf() {
+            for u in node.leaf_range() {
+                let (ulo, uhi) = prim_box(&tq.prim_bounds[u]);
+                if (ms || mq.slot(u)) && overlap(plo, phi, ulo, uhi) {
+                    let iq = tq.prim_indices[u];
+                    if SELF {
+                        f(ip.min(iq), ip.max(iq));
+                    } else if SWAP {
+                        f(iq, ip);
+                    } else {
+                        f(ip, iq);
+                    }
+                }
+            }
+        } else {
+            let (l, r) = (cur + 1, node.right() as usize);
+            let (llo, lhi) = node_box(&nodes[l]);
+            let (rlo, rhi) = node_box(&nodes[r]);
+            let ol = (ms || mq.node(l as u32)) && overlap(plo, phi, llo, lhi);
+            let or = (ms || mq.node(r as u32)) && overlap(plo, phi, rlo, rhi);
+            match (ol, or) {
+                (true, true) => {
+                    qstack.push(r as u32);
+                    cur = l;
+                    continue;
+                }
+                (true, false) => {
+                    cur = l;
+                    continue;
+                }
+                (false, true) => {
+                    cur = r;
+                    continue;
+                }
+                (false, false) => {}
+            }
+        }
+        match qstack.pop() {
+            Some(c) => cur = c as usize,
+            None => return,
         }
     }
 }
