@@ -87,9 +87,13 @@ impl Bvh {
         loop {
             let node = &self.nodes[cur];
             if node.is_leaf() {
+                // A leaf of one primitive has that primitive's box (builders and refit make
+                // leaf boxes from their primitives), which the ray was just seen to enter
+                // before `best_t`: no second slab test.
+                let single = node.count == 1;
                 for slot in node.leaf_range() {
                     let b = &self.prim_bounds[slot];
-                    if ray.slab(&b.min, &b.max, best_t).is_none() {
+                    if !single && ray.slab(&b.min, &b.max, best_t).is_none() {
                         continue;
                     }
                     let prim = self.prim_indices[slot];
