@@ -5,8 +5,9 @@ use canopy_core::{Aabb, Bvh};
 use nalgebra::Point3;
 
 use crate::error::CollisionError;
-use crate::parts::{build_part_tree, mesh_triangle_aabbs, Parts};
+use crate::parts::{build_part_tree, mesh_local_aabb, mesh_triangle_aabbs, Parts};
 use crate::validate::check_mesh_buffers;
+use parry3d::bounding_volume::Aabb as ParryAabb;
 
 /// The state of one deformable mesh of the world.
 pub(crate) struct DeformableMesh {
@@ -15,6 +16,8 @@ pub(crate) struct DeformableMesh {
     /// BVH over the triangle boxes grown by `margin` (the last update's prediction).
     pub tree: Bvh,
     pub margin: f32,
+    /// Exact local box of the triangles, as of the last refit.
+    pub local_aabb: ParryAabb,
     /// The vertices changed since the tree was last refit.
     pub dirty: bool,
 }
@@ -25,7 +28,9 @@ impl DeformableMesh {
         check_mesh_buffers(&vertices, &indices)?;
         let boxes = mesh_triangle_aabbs(&vertices, &indices, 0.0);
         let tree = build_part_tree(&boxes)?;
+        let local_aabb = mesh_local_aabb(&vertices, &indices);
         Ok(Self {
+            local_aabb,
             vertices,
             indices,
             tree,
@@ -67,6 +72,7 @@ impl DeformableMesh {
             .refit(boxes)
             .map_err(|_| CollisionError::NonFiniteBounds)?;
         self.margin = margin;
+        self.local_aabb = mesh_local_aabb(&self.vertices, &self.indices);
         self.dirty = false;
         Ok(())
     }
@@ -76,6 +82,7 @@ impl DeformableMesh {
         Parts::Mesh {
             vertices: &self.vertices,
             indices: &self.indices,
+            local_aabb: self.local_aabb,
         }
     }
 }

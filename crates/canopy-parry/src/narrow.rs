@@ -247,16 +247,32 @@ fn composite_composite(
         m.subshape_pos2 = parts2.with_part(b, &mut |p, _, _| p.copied()).flatten();
         m
     });
+    // parry's routine walks the larger composite first and composes the part poses along
+    // that order; the same composition is used here so that the results match bit for bit.
+    let larger_second = parts1.size_sq() < parts2.size_sq();
+    let pos21 = pos12.inverse();
     for (&(a, b), manifold) in pair.keys.iter().zip(pair.manifolds.iter_mut()) {
         parts1.with_part(a, &mut |part_pos1, part1, normals1| {
             parts2.with_part(b, &mut |part_pos2, part2, normals2| {
-                let pos_a = match part_pos2 {
-                    Some(p) => pos12 * p,
-                    None => *pos12,
-                };
-                let pos = match part_pos1 {
-                    Some(p) => p.inv_mul(&pos_a),
-                    None => pos_a,
+                let pos = if larger_second {
+                    let pos_a = match part_pos2 {
+                        Some(p) => pos12 * p,
+                        None => *pos12,
+                    };
+                    match part_pos1 {
+                        Some(p) => p.inv_mul(&pos_a),
+                        None => pos_a,
+                    }
+                } else {
+                    let pos_b = match part_pos1 {
+                        Some(p) => pos21 * p,
+                        None => pos21,
+                    };
+                    match part_pos2 {
+                        Some(p) => p.inv_mul(&pos_b),
+                        None => pos_b,
+                    }
+                    .inverse()
                 };
                 let result = DefaultQueryDispatcher.contact_manifold_convex_convex(
                     &pos, part1, part2, normals1, normals2, prediction, manifold,

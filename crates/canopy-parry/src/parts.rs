@@ -20,6 +20,8 @@ pub(crate) enum Parts<'a> {
     Mesh {
         vertices: &'a [Point3<f32>],
         indices: &'a [[u32; 3]],
+        /// Exact local box of the triangles (what parry's own mesh BVH would have as root).
+        local_aabb: ParryAabb,
     },
 }
 
@@ -39,10 +41,22 @@ impl Parts<'_> {
                 });
                 out
             }
-            Parts::Mesh { vertices, indices } => {
+            Parts::Mesh {
+                vertices, indices, ..
+            } => {
                 let tri = mesh_triangle(vertices, indices, i)?;
                 Some(f(None, &tri, None))
             }
+        }
+    }
+
+    /// Squared norm of the half-extents of the composite's local box: parry's composite-vs-
+    /// composite routine traverses the larger side first, which decides how it composes the
+    /// part poses (replicated so results match parry to the last bit).
+    pub fn size_sq(&self) -> f32 {
+        match self {
+            Parts::Shape(composite) => composite.bvh().root_aabb().half_extents().norm_squared(),
+            Parts::Mesh { local_aabb, .. } => local_aabb.half_extents().norm_squared(),
         }
     }
 
@@ -93,6 +107,17 @@ pub(crate) fn mesh_triangle_aabbs(
         .iter()
         .map(|t| Aabb::from_points(t.iter().map(|&v| &vertices[v as usize])).loosened(margin))
         .collect()
+}
+
+/// Exact box of the triangles of a vertex / index buffer.
+pub(crate) fn mesh_local_aabb(vertices: &[Point3<f32>], indices: &[[u32; 3]]) -> ParryAabb {
+    let mut aabb = ParryAabb::new_invalid();
+    for &v in indices.iter().flatten() {
+        if let Some(p) = vertices.get(v as usize) {
+            aabb.take_point(*p);
+        }
+    }
+    aabb
 }
 
 /// Builds the BVH over part boxes.

@@ -56,6 +56,7 @@ impl Object {
                     None => Parts::Mesh {
                         vertices: &[],
                         indices: &[],
+                        local_aabb: parry3d::bounding_volume::Aabb::new_invalid(),
                     },
                 },
                 tree,
