@@ -4,6 +4,8 @@
 //! instruction counts of the replay alone.
 //!
 //! `cargo run --release --example broadphase_replay -- SCENE rapier|canopy [STEPS] [small|full]`
+//! (canopy's margin and velocity stretch can be overridden with `CANOPY_MARGIN` and
+//! `CANOPY_VELOCITY_STEPS`).
 
 use canopy::rapier::CanopyBroadPhase;
 use canopy::scenes::harness::{replay, Recorder};
@@ -31,7 +33,18 @@ fn main() {
     let (first, rest) = updates.split_first().expect("one update at least");
     let mut bp: Box<dyn BroadPhase> = match which {
         "rapier" => Box::new(BroadPhaseBvh::new()),
-        _ => Box::new(CanopyBroadPhase::new()),
+        _ => {
+            // Optional overrides for tuning: CANOPY_MARGIN, CANOPY_VELOCITY_STEPS.
+            let mut config = canopy::rapier::CanopyBroadPhaseConfig::default();
+            let var = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f32>().ok());
+            if let Some(m) = var("CANOPY_MARGIN") {
+                config.margin = m;
+            }
+            if let Some(v) = var("CANOPY_VELOCITY_STEPS") {
+                config.velocity_steps = v;
+            }
+            Box::new(CanopyBroadPhase::with_config(config))
+        }
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)

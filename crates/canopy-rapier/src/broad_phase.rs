@@ -25,6 +25,10 @@ use crate::stats::BroadPhaseStats;
 use canopy_core::{Aabb, PairMarks};
 use rapier3d::prelude::*;
 
+/// With fewer moved tree members than one in this many, new pairs are found by one query per
+/// moved proxy instead of marked pair walks.
+const SPARSE_MOVES: usize = 8;
+
 /// A broadphase for Rapier built on canopy-core BVHs: fat boxes, one tree per mobility
 /// (fixed, kinematic, dynamic), a move buffer, per-proxy pair lists and pair filtering at the
 /// source. Swap it in wherever Rapier takes a `&mut dyn BroadPhase`.
@@ -67,8 +71,9 @@ pub struct CanopyBroadPhase {
     stats: BroadPhaseStats,
     /// Number of proxies whose `active_collision_types` allow fixed-fixed contacts.
     fixed_fixed: usize,
-    /// Reused buffer: the modified handles, sorted.
-    scratch_order: Vec<u64>,
+    /// Reused buffers: a bitmap of the modified handles' indices (all zero between updates)
+    /// and their generations.
+    scratch_order: (Vec<u64>, Vec<u32>),
 }
 
 impl CanopyBroadPhase {
@@ -371,25 +376,77 @@ impl CanopyBroadPhase {
         }
     }
 
-    /// Step 5 for a pending proxy (not in a BVH yet): its partners, found by a query on every
-    /// tree it may pair with. Among pending proxies the one with the smaller id reports.
-    fn pending_pairs(&self, id: u32, out: &mut Vec<(u32, u32)>) {
+    /// Step 5 for the pending proxies (not in a BVH yet): against BVH members, one query each
+    /// on every tree they may pair with; among themselves, one sweep along x.
+    fn pending_pairs(&self, out: &mut Vec<(u32, u32)>) {
+        let mut pending: Vec<(f32, u32)> = Vec::new();
+        for t in &self.trees {
+            for &id in &t.pending {
+                let Some(p) = &self.proxies[id as usize] else {
+                    continue;
+                };
+                pending.push((p.fat.min.x, id));
+                for m in Mobility::ALL {
+                    let tree = &self.trees[m as usize];
+                    if tree.members.is_empty() || !self.may_query(p, m) {
+                        continue;
+                    }
+                    tree.query_members(&p.fat, |other| {
+                        if let Some(o) = &self.proxies[other as usize] {
+                            if p.filter.may_pair(&o.filter) {
+                                out.push((id, other));
+                            }
+                        }
+                    });
+                }
+            }
+        }
+        // Sweep and prune: sorted by min x (ties by id, for a deterministic order), each box
+        // meets the boxes that start before it ends.
+        pending.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for (i, &(_, a)) in pending.iter().enumerate() {
+            let Some(pa) = &self.proxies[a as usize] else {
+                continue;
+            };
+            for &(min_x, b) in &pending[i + 1..] {
+                if min_x > pa.fat.max.x {
+                    break;
+                }
+                let Some(pb) = &self.proxies[b as usize] else {
+                    continue;
+                };
+                if pa.fat.intersects(&pb.fat)
+                    && pa.filter.may_pair(&pb.filter)
+                    && (pa.mobility != Mobility::Fixed
+                        || pb.mobility != Mobility::Fixed
+                        || self.fixed_fixed > 0)
+                {
+                    out.push((a, b));
+                }
+            }
+        }
+    }
+
+    /// Step 5 for a moved tree member when few moved: its partners among BVH members, found by
+    /// a query on every tree it may pair with (pending partners are found by
+    /// [`Self::pending_pairs`]); among moved members the one with the smaller id reports.
+    fn member_pairs(&self, id: u32, out: &mut Vec<(u32, u32)>) {
         let Some(p) = &self.proxies[id as usize] else {
             return;
         };
         for m in Mobility::ALL {
             let tree = &self.trees[m as usize];
-            if tree.len() == 0 || !self.may_query(p, m) {
+            if tree.members.is_empty() || !self.may_query(p, m) {
                 continue;
             }
-            tree.query(&p.fat, &self.proxies, |other| {
+            tree.query_members(&p.fat, |other| {
                 if other == id {
                     return;
                 }
                 let Some(o) = &self.proxies[other as usize] else {
                     return;
                 };
-                if matches!(o.loc, Loc::Pending(_)) && other < id {
+                if o.moved && other < id {
                     return;
                 }
                 if p.filter.may_pair(&o.filter) {
@@ -419,6 +476,27 @@ impl CanopyBroadPhase {
     /// Step 5: every new candidate pair of a moved proxy. Tree members that moved are marked
     /// and found by one marked pair walk per pair of trees; pending proxies query.
     fn find_new_pairs(&mut self, moved: &[u32]) -> Vec<(u32, u32)> {
+        let in_trees = |p: &&Proxy| matches!(p.loc, Loc::Tree(_));
+        let moved_members = moved
+            .iter()
+            .filter_map(|&id| self.proxies[id as usize].as_ref())
+            .filter(in_trees)
+            .count();
+        let members: usize = self.trees.iter().map(|t| t.members.len()).sum();
+        if moved_members * SPARSE_MOVES < members {
+            // Few moved: one query each beats a walk over trees that are mostly unmarked.
+            let mut found = Vec::new();
+            for &id in moved {
+                if self.proxies[id as usize]
+                    .as_ref()
+                    .is_some_and(|p| in_trees(&p))
+                {
+                    self.member_pairs(id, &mut found);
+                }
+            }
+            self.pending_pairs(&mut found);
+            return found;
+        }
         let mut marked = [false; 3];
         for &id in moved {
             if let Some(p) = &self.proxies[id as usize] {
@@ -489,11 +567,7 @@ impl CanopyBroadPhase {
                 (false, false) => ta.bvh.pairs_with_marked(ma, &tb.bvh, mb, &mut keep),
             }
         }
-        for t in 0..3 {
-            for &id in &self.trees[t].pending {
-                self.pending_pairs(id, &mut found);
-            }
-        }
+        self.pending_pairs(&mut found);
         found
     }
 }
@@ -525,20 +599,30 @@ impl BroadPhase for CanopyBroadPhase {
 
         // 2. Re-examine every modified collider.
         let margin = self.config.margin * params.length_unit;
-        // In handle order: the collider arena and the proxies are then read front to back,
-        // which the hardware prefetcher turns into streaming instead of one miss per collider.
-        let mut order = std::mem::take(&mut self.scratch_order);
-        order.clear();
-        order.extend(modified_colliders.iter().map(|h| {
+        // In handle order (a bitmap of the modified indices, read back in order): the collider
+        // arena and the proxies are then read front to back, which the hardware prefetcher
+        // turns into streaming instead of one cache miss per collider.
+        let (mut bits, mut generations) = std::mem::take(&mut self.scratch_order);
+        for h in modified_colliders {
             let (index, generation) = h.into_raw_parts();
-            ((index as u64) << 32) | generation as u64
-        }));
-        order.sort_unstable();
-        for &key in &order {
-            let handle = ColliderHandle::from_raw_parts((key >> 32) as u32, key as u32);
-            self.examine(params, colliders, bodies, handle, margin, events);
+            let (word, index) = ((index / 64) as usize, index as usize);
+            if word >= bits.len() {
+                bits.resize(word + 1, 0u64);
+                generations.resize(bits.len() * 64, 0);
+            }
+            bits[word] |= 1 << (index % 64);
+            generations[index] = generation;
         }
-        self.scratch_order = order;
+        for word in 0..bits.len() {
+            while bits[word] != 0 {
+                let bit = bits[word].trailing_zeros();
+                bits[word] &= bits[word] - 1;
+                let index = word as u32 * 64 + bit;
+                let handle = ColliderHandle::from_raw_parts(index, generations[index as usize]);
+                self.examine(params, colliders, bodies, handle, margin, events);
+            }
+        }
+        self.scratch_order = (bits, generations);
 
         // 3. Trees.
         let policy = self.config.rebuild;

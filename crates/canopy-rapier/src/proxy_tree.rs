@@ -163,20 +163,13 @@ impl ProxyTree {
         self.rebuilds += 1;
     }
 
-    /// Calls `f` with every live proxy id whose fat box overlaps `aabb` (tree and pending).
+    /// Calls `f` with every live BVH member whose fat box overlaps `aabb` (pending excluded).
     #[inline]
-    pub fn query(&self, aabb: &Aabb, proxies: &[Option<Proxy>], mut f: impl FnMut(u32)) {
+    pub fn query_members(&self, aabb: &Aabb, mut f: impl FnMut(u32)) {
         for slot in self.bvh.overlaps(aabb) {
             let id = self.members[slot as usize];
             if id != DEAD {
                 f(id);
-            }
-        }
-        for &id in &self.pending {
-            if let Some(p) = &proxies[id as usize] {
-                if p.fat.intersects(aabb) {
-                    f(id);
-                }
             }
         }
     }
