@@ -6,6 +6,7 @@ use parry3d::query::{DefaultQueryDispatcher, PersistentQueryDispatcher};
 use parry3d::shape::{Shape, SharedShape};
 use rayon::prelude::*;
 
+use crate::narrow::in_contact;
 use crate::pair::Manifold;
 use crate::self_contact::{adjacent, triangle_pair_manifold};
 
@@ -13,7 +14,8 @@ use crate::self_contact::{adjacent, triangle_pair_manifold};
 pub type TruthPair = (usize, usize, Vec<Manifold>);
 
 /// `DefaultQueryDispatcher.contact_manifolds(pose_i⁻¹·pose_j, shape_i, shape_j, prediction)`
-/// called fresh on pair `(i, j)`: its manifolds when some has a point.
+/// called fresh on pair `(i, j)`: its manifolds when some point is within `prediction` (see
+/// [`in_contact`]).
 pub fn pair(
     objects: &[(Isometry3<f32>, SharedShape)],
     i: usize,
@@ -34,13 +36,10 @@ pub fn pair(
             &mut None,
         )
         .ok()?;
-    manifolds
-        .iter()
-        .any(|m| !m.points.is_empty())
-        .then_some(manifolds)
+    in_contact(&manifolds, prediction).then_some(manifolds)
 }
 
-/// Every pair `i < j` with contact points, in order, one thread.
+/// Every pair `i < j` in contact, in order, one thread.
 pub fn contact_pairs(objects: &[(Isometry3<f32>, SharedShape)], prediction: f32) -> Vec<TruthPair> {
     let n = objects.len();
     (0..n)
@@ -64,9 +63,11 @@ pub fn par_contact_pairs(
 }
 
 /// Every pair of triangles `(t1, t2)` of two meshes (`t1` of the first) whose convex-convex
-/// manifold has a point, with its smallest point distance: all `n1 × n2` pairs through parry's
-/// `contact_manifold_convex_convex`, with the meshes' pseudo-normal constraints as parry's own
-/// mesh-mesh routine passes them.
+/// manifold has a point within `prediction`, with its smallest point distance: all `n1 × n2` pairs through parry's
+/// `contact_manifold_convex_convex`, with the meshes' pseudo-normal constraints and the
+/// relative pose composed as parry's own mesh-mesh routine does (it walks the larger mesh
+/// first; with pseudo-normals the manifold is not continuous in the pose, so even the last bit
+/// of the pose matters).
 pub fn mesh_mesh_triangle_pairs(
     mesh1: &parry3d::shape::TriMesh,
     pose1: &Isometry3<f32>,
@@ -75,6 +76,12 @@ pub fn mesh_mesh_triangle_pairs(
     prediction: f32,
 ) -> Vec<(u32, u32, f32)> {
     let pos12 = pose1.inv_mul(pose2);
+    let size = |m: &parry3d::shape::TriMesh| m.bvh().root_aabb().half_extents().norm_squared();
+    let pos12 = if size(mesh1) < size(mesh2) {
+        pos12
+    } else {
+        pos12.inverse().inverse()
+    };
     let mut out = Vec::new();
     for t1 in 0..mesh1.num_triangles() as u32 {
         let tri1 = mesh1.triangle(t1);
@@ -93,8 +100,9 @@ pub fn mesh_mesh_triangle_pairs(
                 &mut m,
             );
             if ok.is_ok() {
-                if let Some(d) = crate::pair::min_distance(std::slice::from_ref(&m)) {
-                    out.push((t1, t2, d));
+                match crate::pair::min_distance(std::slice::from_ref(&m)) {
+                    Some(d) if d <= prediction => out.push((t1, t2, d)),
+                    _ => {}
                 }
             }
         }

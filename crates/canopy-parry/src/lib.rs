@@ -56,6 +56,7 @@ pub use coherence::Coherence;
 pub use error::CollisionError;
 pub use event::ContactEvent;
 pub use handle::ObjectHandle;
+pub use narrow::in_contact;
 pub use pair::{min_distance, ContactPair, Manifold, WorldContact};
 pub use self_contact::{adjacent, triangle_pair_manifold, SelfContact};
 pub use stats::UpdateStats;

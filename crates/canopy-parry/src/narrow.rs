@@ -82,7 +82,17 @@ pub(crate) fn update_pair(
             composite_composite(pair, keys, parts1, parts2, &pos12, prediction);
         }
     }
-    pair.touching = pair.manifolds.iter().any(|m| !m.points.is_empty());
+    pair.touching = in_contact(&pair.manifolds, prediction);
+}
+
+/// `true` when some manifold point is at most `prediction` apart. parry's polygon clipping can
+/// leave points farther than that in a manifold (speculative points of a face in contact);
+/// whether they appear depends on culling details, so they do not count as contact.
+pub fn in_contact(manifolds: &[Manifold], prediction: f32) -> bool {
+    manifolds
+        .iter()
+        .flat_map(|m| m.points.iter())
+        .any(|p| p.dist <= prediction)
 }
 
 /// The parts of `tree` whose boxes overlap `local` (a parry box in the tree's frame), sorted.

@@ -73,7 +73,9 @@ impl ContactPair {
         &self.manifolds
     }
 
-    /// `true` when at least one manifold has a point (within the prediction distance).
+    /// `true` when some contact point is at most the prediction distance apart (equivalently,
+    /// `min_distance() <= prediction`). Manifolds may hold farther, speculative points (from
+    /// parry's polygon clipping); they alone do not make a contact.
     #[inline]
     pub fn has_contacts(&self) -> bool {
         self.touching

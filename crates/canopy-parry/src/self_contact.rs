@@ -53,7 +53,7 @@ pub fn triangle_pair_manifold(
             &mut manifold,
         )
         .ok()?;
-    (!manifold.points.is_empty()).then_some(manifold)
+    crate::narrow::in_contact(std::slice::from_ref(&manifold), prediction).then_some(manifold)
 }
 
 /// The self-contacts of a mesh whose `tree` holds its triangle boxes grown by at least

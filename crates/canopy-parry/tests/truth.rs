@@ -81,7 +81,7 @@ pub fn run_fresh_scenario(
         world.update(prediction).unwrap();
         let (handles, objects) = truth_objects(&world);
         let truth = truth_summary(&objects, prediction);
-        let mine = world_summary(&world, &handles);
+        let mine = world_summary(&world, &handles, prediction);
         assert_same(&mine, &truth, TOL, &format!("seed {seed} step {step}"));
         seen += truth.len();
 

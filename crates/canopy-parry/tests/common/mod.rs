@@ -120,15 +120,16 @@ pub fn random_shape(rng: &mut SeedRng, scale: f32) -> SharedShape {
     }
 }
 
-/// Contacts of one pair, reduced to what is compared: each manifold with points as
-/// `(subshape1, subshape2, smallest distance)`, sorted.
+/// Contacts of one pair, reduced to what is compared: each manifold with a point within the
+/// prediction distance as `(subshape1, subshape2, smallest distance)`, sorted.
 pub type Summary = Vec<((usize, usize), Vec<(u32, u32, f32)>)>;
 
-fn reduce(manifolds: &[canopy_parry::Manifold]) -> Vec<(u32, u32, f32)> {
+fn reduce(manifolds: &[canopy_parry::Manifold], prediction: f32) -> Vec<(u32, u32, f32)> {
     let mut out: Vec<(u32, u32, f32)> = manifolds
         .iter()
         .filter_map(|m| {
             canopy_parry::min_distance(std::slice::from_ref(m))
+                .filter(|d| *d <= prediction)
                 .map(|d| (m.subshape1, m.subshape2, d))
         })
         .collect();
@@ -161,14 +162,18 @@ pub fn truth_objects<T>(
 }
 
 /// The world's contact pairs with object positions in `handles`.
-pub fn world_summary<T>(world: &CollisionWorld<T>, handles: &[ObjectHandle]) -> Summary {
+pub fn world_summary<T>(
+    world: &CollisionWorld<T>,
+    handles: &[ObjectHandle],
+    prediction: f32,
+) -> Summary {
     world
         .contact_pairs()
         .map(|p| {
             let (a, b) = p.objects();
             let i = handles.binary_search(&a).expect("live handle");
             let j = handles.binary_search(&b).expect("live handle");
-            ((i, j), reduce(p.manifolds()))
+            ((i, j), reduce(p.manifolds(), prediction))
         })
         .collect()
 }
@@ -177,7 +182,7 @@ pub fn world_summary<T>(world: &CollisionWorld<T>, handles: &[ObjectHandle]) -> 
 pub fn truth_summary(objects: &[(Isometry3<f32>, SharedShape)], prediction: f32) -> Summary {
     brute_force::par_contact_pairs(objects, prediction)
         .into_iter()
-        .map(|(i, j, m)| ((i, j), reduce(&m)))
+        .map(|(i, j, m)| ((i, j), reduce(&m, prediction)))
         .collect()
 }
 
