@@ -219,7 +219,8 @@ impl<T> CollisionWorld<T> {
 
     /// Inserts a deformable triangle mesh (vertices in its local frame, placed at `pose`).
     /// Move its vertices with [`Self::set_vertices`]; its self-contacts (between triangles
-    /// sharing no vertex) are reported by [`Self::self_contacts`].
+    /// sharing no vertex) are reported by [`Self::self_contacts`], computed fresh every update.
+    /// Against other objects it behaves like a triangle mesh without pseudo-normals.
     ///
     /// ```
     /// use canopy_parry::CollisionWorld;
