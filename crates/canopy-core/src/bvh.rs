@@ -107,7 +107,8 @@ pub struct Bvh {
     pub(crate) nodes: Vec<Node>,
     pub(crate) prim_indices: Vec<u32>,
     pub(crate) prim_bounds: Vec<PrimBounds>,
-    /// Inverse of `prim_indices`: the slot of each primitive.
+    /// Inverse of `prim_indices`: the slot of each primitive. Empty after a build;
+    /// `refit_primitives` makes it when first needed (most users never need it).
     pub(crate) slot_of: Vec<u32>,
 }
 

@@ -1,5 +1,5 @@
-//! 63-bit Morton codes (21 bits per axis) used to sort centroids along a Z-order curve for the
-//! LBVH builder (`build/lbvh.rs`).
+//! 63-bit Morton codes (21 bits per axis): interleaved coordinates that sort points along a
+//! Z-order curve. The LBVH builder (`build/lbvh.rs`) uses an equivalent table-driven encoder.
 
 /// Spreads the low 21 bits of `v` so that bit `i` lands on bit `3 * i`.
 #[inline]

@@ -78,6 +78,12 @@ impl Bvh {
         if changes.is_empty() {
             return Ok(());
         }
+        if self.slot_of.len() != self.prim_indices.len() {
+            self.slot_of = vec![0; self.prim_indices.len()];
+            for (slot, &p) in self.prim_indices.iter().enumerate() {
+                self.slot_of[p as usize] = slot as u32;
+            }
+        }
         for (prim, aabb) in changes {
             self.prim_bounds[self.slot_of[*prim as usize] as usize] = PrimBounds::from_aabb(aabb);
         }

@@ -53,7 +53,7 @@ impl Bvh {
             ensure!((p as usize) < n, "slot {slot}: primitive {p} out of range");
             ensure!(!seen[p as usize], "primitive {p} appears twice");
             ensure!(
-                self.slot_of.get(p as usize) == Some(&(slot as u32)),
+                self.slot_of.is_empty() || self.slot_of.get(p as usize) == Some(&(slot as u32)),
                 "primitive {p}: slot map does not point at slot {slot}"
             );
             seen[p as usize] = true;

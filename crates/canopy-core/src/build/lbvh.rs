@@ -1,210 +1,288 @@
-//! LBVH builder (Karras 2012, "Maximizing parallelism in the construction of BVHs, octrees and
-//! k-d trees").
+//! LBVH builder: a linear BVH over Morton codes (Lauterbach et al. 2009; the hierarchy is the
+//! binary radix tree of Karras 2012, built top-down).
 //!
-//! 1. Morton codes (63-bit) of the centroids in the centroid bounds, in parallel.
-//! 2. Stable radix sort of `(code, index)`; equal codes keep index order, and Karras' common-
-//!    prefix function falls back to the index so identical codes still split evenly.
-//! 3. The hierarchy: every internal node `i` finds its key range and split independently
-//!    (data-parallel, one rayon task per node chunk, exactly as on a GPU).
-//! 4. Layout: a top-down pass from the root writes the depth-first node array, collapsing
-//!    ranges of at most `max_leaf_size` primitives into leaves, and computes every box bottom-up
-//!    on the way back (the halves of large ranges in parallel with `rayon::join`). On a CPU this
-//!    replaces Apetrei's atomic-counter bottom-up pass at lower cost with the same result.
+//! 1. Morton codes of the centroids in the centroid bounds, `b` bits per axis with `b` chosen
+//!    from `n` (`morton_bits`): enough to separate the primitives, few enough that the code and
+//!    the primitive index pack into one `u64` key (`code << index_bits | index`). Keys are then
+//!    unique and their order is the stable order of the codes.
+//! 2. Radix sort of the keys on the code bits only (at most four 11-bit passes; constant digits
+//!    skipped; comparison sort for short inputs).
+//! 3. Layout: a top-down pass writes the depth-first node array. A range of sorted keys splits
+//!    where its highest differing bit turns on (a binary search): the radix tree of Karras 2012
+//!    (the index bits break ties between equal codes), without the nodes inside leaves: ranges
+//!    of at most `max_leaf_size` primitives become leaves. Boxes come bottom-up on the way back;
+//!    the halves of large ranges run in parallel with `rayon::join`.
 
-use super::{append_subtree, centroid, radix_sort_pairs, Bounds, BuildOptions};
+use super::{append_subtree, box_ok, centroid, radix_sort::radix_sort_keys, Bounds, BuildOptions};
 use crate::aabb::Aabb;
 use crate::bvh::{Bvh, Node, PrimBounds};
-use crate::morton::morton_code;
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 
 /// Ranges with at least this many primitives are laid out in parallel.
 const PARALLEL_THRESHOLD: usize = 4096;
 /// Below this many primitives, the data-parallel steps run serially.
 const PARALLEL_MIN: usize = 1 << 14;
 
-/// An internal node of the Karras hierarchy: it covers sorted primitives `lo..=hi` and splits
-/// after `split` (left child covers `lo..=split`, right child `split+1..=hi`).
-#[derive(Clone, Copy, Debug)]
-struct KNode {
-    lo: u32,
-    hi: u32,
-    split: u32,
+/// Bits per axis of the Morton codes for `n` primitives whose index takes `index_bits`: far
+/// beyond one primitive per cell for uniform input (`n^(1/3)` cells per axis) to leave room
+/// for clustered input, at least 11 (33 bits: three radix passes up to 2M primitives), capped
+/// at 21 and by what fits next to the index. Short inputs, sorted by comparison, take all the
+/// bits that fit.
+fn morton_bits(n: usize, index_bits: u32) -> u32 {
+    let fit = ((64 - index_bits) / 3).min(21);
+    if n <= 1024 {
+        fit
+    } else {
+        (index_bits / 3 + 5).clamp(11, fit)
+    }
 }
 
-pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
+/// Builds the tree, or returns the index of the first invalid box.
+pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize> {
     let n = aabbs.len();
     let parallel = options.parallel && n >= PARALLEL_MIN;
 
-    // 1. Morton codes of centroids.
-    let cb = if parallel {
-        aabbs
-            .par_iter()
-            .fold(
-                || Bounds::EMPTY,
-                |mut b, a| {
-                    b.grow_point(&centroid(&a.min_array(), &a.max_array()));
-                    b
-                },
-            )
-            .reduce(|| Bounds::EMPTY, |a, b| a.merged(&b))
+    // 1. Keys: Morton code of the centroid, then the primitive index. The pass over the boxes
+    // that finds the centroid bounds also checks them.
+    const CHUNK: usize = 4096;
+    let (cb, valid) = if parallel {
+        aabbs.par_chunks(CHUNK).map(centroid_bounds).reduce(
+            || (Bounds::EMPTY, true),
+            |a, b| (a.0.merged(&b.0), a.1 & b.1),
+        )
     } else {
-        let mut b = Bounds::EMPTY;
-        for a in aabbs {
-            b.grow_point(&centroid(&a.min_array(), &a.max_array()));
-        }
-        b
+        aabbs
+            .chunks(CHUNK)
+            .map(centroid_bounds)
+            .fold((Bounds::EMPTY, true), |a, b| (a.0.merged(&b.0), a.1 & b.1))
     };
-    let mut inv = [0.0f32; 3];
-    for (i, v) in inv.iter_mut().enumerate() {
+    if !valid {
+        return Err(super::first_invalid(aabbs).expect("an invalid box"));
+    }
+    let index_bits = (usize::BITS - (n - 1).leading_zeros()).max(1);
+    let bits = morton_bits(n, index_bits);
+    let scale = ((1u32 << bits) - 1) as f32;
+    let mut mul = [0.0f32; 3];
+    for (i, v) in mul.iter_mut().enumerate() {
         let e = cb.max[i] - cb.min[i];
-        if e > 0.0 && (1.0 / e).is_finite() {
-            *v = 1.0 / e;
+        if e > 0.0 && (scale / e).is_finite() {
+            *v = scale / e;
         }
     }
-    let code = |a: &Aabb| morton_code(centroid(&a.min_array(), &a.max_array()), cb.min, inv);
+    let key = |i: usize, a: &Aabb| -> u64 {
+        let c = centroid(&a.min_array(), &a.max_array());
+        // Finite input: `max`/`min` need no NaN care; the float-to-int cast saturates.
+        let q = |k: usize| ((c[k] - cb.min[k]) * mul[k]).max(0.0).min(scale) as u32;
+        (morton_encode_lut(q(0), q(1), q(2)) << index_bits) | i as u64
+    };
     let mut keys: Vec<u64> = if parallel {
-        aabbs.par_iter().map(code).collect()
+        aabbs
+            .par_iter()
+            .enumerate()
+            .map(|(i, a)| key(i, a))
+            .collect()
     } else {
-        aabbs.iter().map(code).collect()
-    };
-    let mut prim_indices: Vec<u32> = (0..n as u32).collect();
-
-    // 2. Sort.
-    radix_sort_pairs(&mut keys, &mut prim_indices, parallel);
-    let gather = |&i: &u32| PrimBounds::from_aabb(&aabbs[i as usize]);
-    let prim_bounds: Vec<PrimBounds> = if parallel {
-        prim_indices.par_iter().map(gather).collect()
-    } else {
-        prim_indices.iter().map(gather).collect()
+        aabbs.iter().enumerate().map(|(i, a)| key(i, a)).collect()
     };
 
-    // 3. Hierarchy.
-    let mut nodes = Vec::with_capacity(2 * n / options.max_leaf_size as usize + 1);
+    // 2. Sort on the code bits, then gather indices and boxes in leaf order.
+    radix_sort_keys(&mut keys, index_bits, 3 * bits, parallel);
+    let index_mask = (1u64 << index_bits) - 1;
+    let mut prim_indices: Vec<u32> = Vec::with_capacity(n);
+    let mut prim_bounds: Vec<PrimBounds> = Vec::with_capacity(n);
+    if parallel {
+        keys.par_iter()
+            .map(|&k| {
+                let i = (k & index_mask) as u32;
+                (i, PrimBounds::from_aabb(&aabbs[i as usize]))
+            })
+            .unzip_into_vecs(&mut prim_indices, &mut prim_bounds);
+    } else {
+        gather(
+            &keys,
+            index_mask,
+            aabbs,
+            &mut prim_indices.spare_capacity_mut()[..n],
+            &mut prim_bounds.spare_capacity_mut()[..n],
+        );
+        // SAFETY: `gather` wrote all `n` slots of both.
+        unsafe {
+            prim_indices.set_len(n);
+            prim_bounds.set_len(n);
+        }
+    }
+
+    // 3. Depth-first layout with bottom-up boxes. At most `2n - 1` nodes (ranges split in two
+    // nonempty halves); leaves of `max_leaf_size` (4) average above 2.8 primitives on most
+    // inputs, which the estimate covers; growing past it is rare. The shrink gives back the
+    // unused end (no copy for large blocks).
+    let cap = (3 * n / options.max_leaf_size as usize + 1).min(2 * n - 1);
+    let mut nodes = Vec::with_capacity(cap);
     let ctx = Layout {
-        knodes: if n < 2 {
-            Vec::new()
-        } else if parallel {
-            (0..n as u32 - 1)
-                .into_par_iter()
-                .map(|i| karras_node(&keys, i))
-                .collect()
-        } else {
-            (0..n as u32 - 1).map(|i| karras_node(&keys, i)).collect()
-        },
+        keys: &keys,
         prims: &prim_bounds,
         max_leaf: options.max_leaf_size as usize,
         parallel,
     };
-
-    // 4. Depth-first layout with bottom-up boxes.
-    ctx.emit(0, 0, n as u32 - 1, &mut nodes);
-    Bvh {
+    ctx.emit(0, n, &mut nodes);
+    nodes.shrink_to_fit();
+    Ok(Bvh {
         nodes,
         prim_indices,
         prim_bounds,
         slot_of: Vec::new(),
+    })
+}
+
+/// Writes the primitive index and box of every sorted key. The box reads are random: each is
+/// prefetched a few keys ahead so that the misses overlap.
+fn gather(
+    keys: &[u64],
+    index_mask: u64,
+    aabbs: &[Aabb],
+    indices: &mut [MaybeUninit<u32>],
+    bounds: &mut [MaybeUninit<PrimBounds>],
+) {
+    assert!(indices.len() == keys.len() && bounds.len() == keys.len());
+    const AHEAD: usize = 16;
+    for (j, ((&k, i_out), b_out)) in keys.iter().zip(indices).zip(bounds).enumerate() {
+        if let Some(&ka) = keys.get(j + AHEAD) {
+            prefetch(&aabbs[(ka & index_mask) as usize]);
+        }
+        let i = (k & index_mask) as usize;
+        i_out.write(i as u32);
+        b_out.write(PrimBounds::from_aabb(&aabbs[i]));
     }
 }
 
-/// Length of the common prefix of keys `i` and `j` (Karras' δ), with the index as tie-break;
-/// -1 when `j` is outside the array.
+/// Hints the processor to load `r`'s cache line.
 #[inline(always)]
-fn delta(keys: &[u64], i: u32, j: i64) -> i32 {
-    if j < 0 || j >= keys.len() as i64 {
-        return -1;
+fn prefetch<T>(r: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch never faults and `r` is a valid reference anyway.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+            (r as *const T).cast::<i8>(),
+        );
     }
-    let (a, b) = (keys[i as usize], keys[j as usize]);
-    if a == b {
-        64 + (i ^ j as u32).leading_zeros() as i32
-    } else {
-        (a ^ b).leading_zeros() as i32
-    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = r;
 }
 
-/// Range and split of internal node `i` (Karras 2012, Figure 4).
-fn karras_node(keys: &[u64], i: u32) -> KNode {
-    let ii = i as i64;
-    let d: i64 = if delta(keys, i, ii + 1) > delta(keys, i, ii - 1) {
-        1
-    } else {
-        -1
+/// Centroid bounds of `aabbs`, and whether every box is valid.
+fn centroid_bounds(aabbs: &[Aabb]) -> (Bounds, bool) {
+    let mut b = Bounds::EMPTY;
+    let mut ok = true;
+    for a in aabbs {
+        ok &= box_ok(a);
+        b.grow_point(&centroid(&a.min_array(), &a.max_array()));
+    }
+    (b, ok)
+}
+
+/// Bit `i` of the index moved to bit `3 * i`, for 8-bit indices.
+const SPREAD8: [u32; 256] = {
+    let mut t = [0u32; 256];
+    let mut v = 0;
+    while v < 256 {
+        let mut i = 0;
+        while i < 8 {
+            t[v] |= (((v >> i) & 1) as u32) << (3 * i);
+            i += 1;
+        }
+        v += 1;
+    }
+    t
+};
+
+/// [`crate::morton::morton_encode`] by table, for coordinates below `2^21`.
+#[inline(always)]
+fn morton_encode_lut(x: u32, y: u32, z: u32) -> u64 {
+    let part = |s: u32| -> u64 {
+        let t = |v: u32| SPREAD8[((v >> s) & 255) as usize] as u64;
+        t(x) | (t(y) << 1) | (t(z) << 2)
     };
-    let delta_min = delta(keys, i, ii - d);
-    let mut l_max: i64 = 2;
-    while delta(keys, i, ii + l_max * d) > delta_min {
-        l_max *= 2;
-    }
-    let mut l: i64 = 0;
-    let mut t = l_max / 2;
-    while t >= 1 {
-        if delta(keys, i, ii + (l + t) * d) > delta_min {
-            l += t;
-        }
-        t /= 2;
-    }
-    let j = ii + l * d;
-    let delta_node = delta(keys, i, j);
-    let mut s: i64 = 0;
-    let mut step = l;
-    loop {
-        step = (step + 1) / 2;
-        if delta(keys, i, ii + (s + step) * d) > delta_node {
-            s += step;
-        }
-        if step <= 1 {
-            break;
-        }
-    }
-    let split = ii + s * d + d.min(0);
-    KNode {
-        lo: ii.min(j) as u32,
-        hi: ii.max(j) as u32,
-        split: split as u32,
-    }
+    part(0) | (part(8) << 24) | (part(16) << 48)
 }
 
 struct Layout<'a> {
-    knodes: Vec<KNode>,
+    /// Sorted unique keys.
+    keys: &'a [u64],
     prims: &'a [PrimBounds],
     max_leaf: usize,
     parallel: bool,
 }
 
 impl Layout<'_> {
-    /// Writes the subtree of Karras node `k` (covering `lo..=hi`) at the end of `out`, and
-    /// returns its box.
-    fn emit(&self, k: u32, lo: u32, hi: u32, out: &mut Vec<Node>) -> Bounds {
-        let count = (hi - lo + 1) as usize;
+    /// First slot of the right half of `lo..hi` (at least two keys): the first key with the
+    /// highest bit in which the range's keys differ.
+    #[inline]
+    fn split(&self, lo: usize, hi: usize) -> usize {
+        let (a, b) = (self.keys[lo], self.keys[hi - 1]);
+        let mask = 1u64 << (63 - (a ^ b).leading_zeros());
+        let inner = &self.keys[lo + 1..hi - 1];
+        // The keys with the bit clear come first: short ranges count them (no dependent
+        // loads), long ones search.
+        lo + 1
+            + if inner.len() <= 64 {
+                inner
+                    .iter()
+                    .map(|&k| ((k & mask) == 0) as usize)
+                    .sum::<usize>()
+            } else {
+                inner.partition_point(|&k| k & mask == 0)
+            }
+    }
+
+    /// Writes the subtree over sorted primitives `lo..hi` at the end of `out`, and returns its
+    /// box.
+    fn emit(&self, lo: usize, hi: usize, out: &mut Vec<Node>) -> Bounds {
+        let count = hi - lo;
         if count <= self.max_leaf {
-            let b = Bounds::of_prims(&self.prims[lo as usize..=hi as usize]);
-            out.push(Node::leaf(b.min, b.max, lo, count as u32));
+            let b = Bounds::of_prims(&self.prims[lo..hi]);
+            out.push(Node::leaf(b.min, b.max, lo as u32, count as u32));
             return b;
         }
-        let kn = self.knodes[k as usize];
-        debug_assert!(kn.lo == lo && kn.hi == hi);
         let me = out.len();
-        out.push(Node::leaf([0.0; 3], [0.0; 3], lo, 1)); // placeholder
-        let s = kn.split;
-        // Karras: the left child is internal node `s` (or leaf `s`), the right child internal
-        // node `s + 1` (or leaf `s + 1`); leaves are handled by the size check above.
+        out.push(Node::leaf([0.0; 3], [0.0; 3], lo as u32, 1)); // placeholder
+        let s = self.split(lo, hi);
         let (lb, rb, right) = if self.parallel && count >= PARALLEL_THRESHOLD {
             let (lb, (rb, v)) = rayon::join(
-                || self.emit(s, lo, s, out),
+                || self.emit(lo, s, out),
                 || {
-                    let mut v = Vec::with_capacity(2 * (hi - s) as usize / self.max_leaf + 1);
-                    let rb = self.emit(s + 1, s + 1, hi, &mut v);
+                    let mut v = Vec::with_capacity(2 * (hi - s) - 1);
+                    let rb = self.emit(s, hi, &mut v);
                     (rb, v)
                 },
             );
             (lb, rb, append_subtree(out, v))
         } else {
-            let lb = self.emit(s, lo, s, out);
+            let lb = self.emit(lo, s, out);
             let right = out.len() as u32;
-            let rb = self.emit(s + 1, s + 1, hi, out);
+            let rb = self.emit(s, hi, out);
             (lb, rb, right)
         };
         let b = lb.merged(&rb);
         out[me] = Node::interior(b.min, b.max, right);
         b
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_encoding_matches_morton_encode() {
+        let mut s = 1u32;
+        for _ in 0..10_000 {
+            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+            let (x, y, z) = (s >> 11, (s >> 3) & 0x1f_ffff, s.rotate_left(7) & 0x1f_ffff);
+            assert_eq!(
+                morton_encode_lut(x, y, z),
+                crate::morton::morton_encode(x, y, z)
+            );
+        }
     }
 }

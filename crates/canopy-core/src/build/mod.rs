@@ -1,5 +1,5 @@
 //! Builders. [`BuildOptions`] picks one; each lives in its own file:
-//! `binned_sah.rs` (Wald 2007, parallel top levels) and `lbvh.rs` (Karras 2012, data-parallel),
+//! `binned_sah.rs` (Wald 2007, parallel top levels) and `lbvh.rs` (Morton order, Karras 2012's radix tree built top-down),
 //! with the radix sort the LBVH needs in `radix_sort.rs`. Every builder checks its input here
 //! first and writes the same depth-first [`Bvh`] layout.
 
@@ -21,8 +21,8 @@ pub enum Builder {
     /// default.
     #[default]
     BinnedSah,
-    /// Linear BVH over 63-bit Morton codes (Karras 2012): the fastest build, trees of lower
-    /// quality. Good for trees rebuilt every step.
+    /// Linear BVH over Morton codes (11 to 21 bits per axis; the radix tree of Karras 2012):
+    /// the fastest build, trees of lower quality. Good for trees rebuilt every step.
     Lbvh,
 }
 
@@ -95,9 +95,27 @@ impl BuildOptions {
     }
 }
 
+/// `true` when `a` is valid ([`Aabb::is_valid`]), computed without branches.
+#[inline(always)]
+pub(crate) fn box_ok(a: &Aabb) -> bool {
+    let (lo, hi) = (a.min_array(), a.max_array());
+    let mut ok = true;
+    for i in 0..3 {
+        ok &= (lo[i].abs() <= f32::MAX) & (hi[i].abs() <= f32::MAX) & (lo[i] <= hi[i]);
+    }
+    ok
+}
+
 /// Index of the first invalid box, if any.
 pub(crate) fn first_invalid(aabbs: &[Aabb]) -> Option<usize> {
-    aabbs.iter().position(|a| !a.is_valid())
+    // Branch-free checks over blocks; the exact position only when a block fails.
+    const BLOCK: usize = 64;
+    for (b, block) in aabbs.chunks(BLOCK).enumerate() {
+        if !block.iter().fold(true, |acc, a| acc & box_ok(a)) {
+            return block.iter().position(|a| !box_ok(a)).map(|i| b * BLOCK + i);
+        }
+    }
+    None
 }
 
 pub(crate) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, BvhError> {
@@ -105,21 +123,22 @@ pub(crate) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, BvhEr
     if aabbs.len() >= u32::MAX as usize {
         return Err(BvhError::TooManyPrimitives { count: aabbs.len() });
     }
-    if let Some(index) = first_invalid(aabbs) {
-        return Err(BvhError::InvalidAabb { index });
+    // The LBVH checks the boxes in its first pass over them.
+    if options.builder != Builder::Lbvh {
+        if let Some(index) = first_invalid(aabbs) {
+            return Err(BvhError::InvalidAabb { index });
+        }
     }
     if aabbs.is_empty() {
         return Ok(Bvh::default());
     }
-    let mut bvh = match options.builder {
-        Builder::BinnedSah => binned_sah::build(aabbs, options),
-        Builder::Lbvh => lbvh::build(aabbs, options),
-    };
-    bvh.slot_of = vec![0; bvh.prim_indices.len()];
-    for (slot, &p) in bvh.prim_indices.iter().enumerate() {
-        bvh.slot_of[p as usize] = slot as u32;
+    // The slot map (`Bvh::slot_of`) is left empty: `refit_primitives` makes it when first needed.
+    match options.builder {
+        Builder::BinnedSah => Ok(binned_sah::build(aabbs, options)),
+        Builder::Lbvh => {
+            lbvh::build(aabbs, options).map_err(|index| BvhError::InvalidAabb { index })
+        }
     }
-    Ok(bvh)
 }
 
 /// Running min/max bounds on raw arrays, used by the builders.

@@ -141,6 +141,149 @@ fn scatter_parallel(keys: &[u64], vals: &[u32], dk: &mut [u64], dv: &mut [u32], 
         });
 }
 
+/// Most bits of one digit of [`radix_sort_keys`].
+const KEY_DIGIT_MAX: u32 = 11;
+
+/// Sorts `keys` ascending by their bits `lo_bit .. lo_bit + bits`, stably (keys equal in those
+/// bits keep their order). Short inputs fall back to a comparison sort of whole keys, which
+/// gives the same order when the bits below `lo_bit` already ascend in input order (the LBVH
+/// packs the primitive index there).
+///
+/// LSD passes of at most 11 bits (all histograms from one read of the keys); digits every key
+/// shares are skipped.
+pub(crate) fn radix_sort_keys(keys: &mut Vec<u64>, lo_bit: u32, bits: u32, parallel: bool) {
+    let n = keys.len();
+    if n < 2 || bits == 0 {
+        return;
+    }
+    if n <= SMALL_SORT {
+        keys.sort_unstable();
+        return;
+    }
+    let passes = bits.div_ceil(KEY_DIGIT_MAX);
+    let width = bits.div_ceil(passes);
+    let buckets = 1usize << width;
+    let mask = buckets as u64 - 1;
+    let dig = move |k: u64, p: u32| ((k >> (lo_bit + p * width)) & mask) as usize;
+    let mut tmp: Vec<u64> = Vec::with_capacity(n);
+    if parallel && n >= PARALLEL_THRESHOLD {
+        let or = keys
+            .par_iter()
+            .fold(|| 0u64, |a, &k| a | k)
+            .reduce(|| 0, |a, b| a | b);
+        let and = keys
+            .par_iter()
+            .fold(|| u64::MAX, |a, &k| a & k)
+            .reduce(|| u64::MAX, |a, b| a & b);
+        let varying = or ^ and;
+        tmp.resize(n, 0);
+        for p in (0..passes).filter(|&p| dig(varying, p) != 0) {
+            scatter_keys_parallel(keys, &mut tmp, |k| dig(k, p), buckets);
+            std::mem::swap(keys, &mut tmp);
+        }
+        return;
+    }
+    // One read of the keys fills the histograms of every pass; a digit that every key shares
+    // (one bucket holds them all) needs no pass.
+    let mut hist = vec![0u32; passes as usize * buckets];
+    for &k in keys.iter() {
+        for p in 0..passes {
+            // SAFETY: `p < passes` and the digit is masked below `buckets`.
+            unsafe { *hist.get_unchecked_mut(p as usize * buckets + dig(k, p)) += 1 };
+        }
+    }
+    let active: Vec<u32> = (0..passes)
+        .filter(|&p| {
+            let h = &hist[p as usize * buckets..(p as usize + 1) * buckets];
+            h[dig(keys[0], p)] as usize != n
+        })
+        .collect();
+    if active.is_empty() {
+        return;
+    }
+    tmp.resize(n, 0);
+    for &p in &active {
+        let offsets = &mut hist[p as usize * buckets..(p as usize + 1) * buckets];
+        let mut sum = 0u32;
+        for o in offsets.iter_mut() {
+            let c = *o;
+            *o = sum;
+            sum += c;
+        }
+        for &k in keys.iter() {
+            let d = dig(k, p);
+            // SAFETY: `d < buckets` (masked digit).
+            let o = unsafe { offsets.get_unchecked_mut(d) };
+            // Offsets partition 0..n, so `*o < n`.
+            tmp[*o as usize] = k;
+            *o += 1;
+        }
+        std::mem::swap(keys, &mut tmp);
+    }
+}
+
+/// Inputs up to this long are sorted by comparison in [`radix_sort_keys`].
+const SMALL_SORT: usize = 1024;
+
+fn scatter_keys_parallel(
+    keys: &[u64],
+    dk: &mut [u64],
+    dig: impl Fn(u64) -> usize + Sync,
+    buckets: usize,
+) {
+    let n = keys.len();
+    let chunks = (rayon::current_num_threads() * 4).clamp(1, n.div_ceil(4096));
+    let chunk_len = n.div_ceil(chunks);
+    let mut hist: Vec<Vec<usize>> = keys
+        .par_chunks(chunk_len)
+        .map(|c| {
+            let mut h = vec![0usize; buckets];
+            for &k in c {
+                h[dig(k)] += 1;
+            }
+            h
+        })
+        .collect();
+    let mut sum = 0;
+    for b in 0..buckets {
+        for h in hist.iter_mut() {
+            let c = h[b];
+            h[b] = sum;
+            sum += c;
+        }
+    }
+    debug_assert_eq!(sum, n);
+    let dest = KeyDest(dk.as_mut_ptr());
+    keys.par_chunks(chunk_len)
+        .zip(hist.par_iter_mut())
+        .for_each(|(ck, offsets)| {
+            for &k in ck {
+                let d = dig(k);
+                let o = offsets[d];
+                // SAFETY: `o < n` and no other chunk owns slot `o` (the offsets partition
+                // 0..n); the destination outlives this scope.
+                unsafe { dest.write(o, k) };
+                offsets[d] = o + 1;
+            }
+        });
+}
+
+/// Destination of [`scatter_keys_parallel`]; each task writes a disjoint set of slots.
+#[derive(Clone, Copy)]
+struct KeyDest(*mut u64);
+// SAFETY: tasks write disjoint indices, see `scatter_keys_parallel`.
+unsafe impl Send for KeyDest {}
+unsafe impl Sync for KeyDest {}
+
+impl KeyDest {
+    /// # Safety
+    /// `o` is in bounds and no other thread writes slot `o`.
+    #[inline(always)]
+    unsafe fn write(&self, o: usize, k: u64) {
+        *self.0.add(o) = k;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -153,6 +296,36 @@ mod tests {
         expect.sort(); // (key, original index): the stable order
         assert_eq!(k, expect.iter().map(|e| e.0).collect::<Vec<_>>());
         assert_eq!(v, expect.iter().map(|e| e.1).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn key_sort_sorts_bit_ranges_stably() {
+        let mut s = 99u64;
+        let mut rnd = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        for &n in &[0usize, 1, 2, 17, 1000, 1025, 5000, 100_000] {
+            for &(lo, bits) in &[(20u32, 44u32), (14, 30), (17, 3), (40, 24)] {
+                let idx_mask = (1u64 << lo) - 1;
+                let keys: Vec<u64> = (0..n as u64)
+                    .map(|i| {
+                        let hi = if bits == 3 { rnd() % 3 } else { rnd() };
+                        ((hi & ((1u64 << bits) - 1)) << lo) | (i & idx_mask)
+                    })
+                    .collect();
+                let field = |k: u64| k >> lo;
+                let mut expect = keys.clone();
+                expect.sort_by_key(|&k| field(k)); // stable
+                for par in [false, true] {
+                    let mut k = keys.clone();
+                    radix_sort_keys(&mut k, lo, bits, par);
+                    assert_eq!(k, expect, "n {n} lo {lo} bits {bits} par {par}");
+                }
+            }
+        }
     }
 
     #[test]
