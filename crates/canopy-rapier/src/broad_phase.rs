@@ -71,6 +71,13 @@ pub struct CanopyBroadPhase {
     stats: BroadPhaseStats,
     /// Number of proxies whose `active_collision_types` allow fixed-fixed contacts.
     fixed_fixed: usize,
+    /// Proxies examined this update (their exact box may have changed), in examine order.
+    touched: Vec<u32>,
+    /// Per proxy id: whether it is in `touched` (all `false` between updates).
+    is_touched: Vec<bool>,
+    /// Per proxy id: the exact collision box at the last update that saw the collider. Kept
+    /// apart from the proxies so the liveness pass reads one dense array.
+    tights: Vec<Aabb>,
     /// Reused buffers: a bitmap of the modified handles' indices (all zero between updates)
     /// and their generations.
     scratch_order: (Vec<u64>, Vec<u32>),
@@ -99,7 +106,8 @@ impl CanopyBroadPhase {
     pub fn stats(&self) -> BroadPhaseStats {
         let mut s = self.stats;
         s.proxies = [0, 1, 2].map(|i| self.trees[i].len());
-        s.pairs = self.pairs.len();
+        s.pairs = self.pairs.live_len();
+        s.candidates = self.pairs.candidate_len();
         s.rebuilds = self.trees.iter().map(|t| t.rebuilds).sum();
         s.refits = self.trees.iter().map(|t| t.refits).sum();
         s
@@ -108,14 +116,14 @@ impl CanopyBroadPhase {
     /// `true` when the pair of colliders is live (reported by `AddPair` and not deleted since).
     pub fn contains_pair(&self, a: ColliderHandle, b: ColliderHandle) -> bool {
         match (self.proxy_id(a), self.proxy_id(b)) {
-            (Some(x), Some(y)) => self.pairs.contains(x, y),
+            (Some(x), Some(y)) => self.pairs.is_live(x, y),
             _ => false,
         }
     }
 
     /// Every live pair, in no particular order.
     pub fn pairs(&self) -> impl Iterator<Item = (ColliderHandle, ColliderHandle)> + '_ {
-        self.pairs.iter().filter_map(|(a, b)| {
+        self.pairs.live_pairs().filter_map(|(a, b)| {
             let pa = self.proxies.get(a as usize)?.as_ref()?;
             let pb = self.proxies.get(b as usize)?.as_ref()?;
             Some((pa.handle, pb.handle))
@@ -257,6 +265,9 @@ impl CanopyBroadPhase {
         if let Some(Some(p)) = self.proxies.get_mut(id as usize) {
             if enabled && p.handle == handle && p.is_valid() && p.filter.same_as(collider, parent) {
                 let tight = Self::collision_aabb(params, collider, parent);
+                self.tights[id as usize] = tight;
+                self.is_touched[id as usize] = true;
+                self.touched.push(id);
                 if p.fat.contains(&tight) {
                     return;
                 }
@@ -292,6 +303,8 @@ impl CanopyBroadPhase {
 
         if id as usize >= self.proxies.len() {
             self.proxies.resize_with(id as usize + 1, || None);
+            self.tights.resize(id as usize + 1, Aabb::EMPTY);
+            self.is_touched.resize(id as usize + 1, false);
         }
         let existing = self.proxies[id as usize].take();
         let mut p = match existing {
@@ -300,6 +313,7 @@ impl CanopyBroadPhase {
                 if filter.active.contains(ActiveCollisionTypes::FIXED_FIXED) {
                     self.fixed_fixed += 1;
                 }
+                self.tights[id as usize] = tight;
                 let mut p = Proxy {
                     handle,
                     fat,
@@ -316,6 +330,8 @@ impl CanopyBroadPhase {
                 self.proxies[id as usize] = Some(p);
                 if valid {
                     self.mark_moved(id);
+                    self.is_touched[id as usize] = true;
+                    self.touched.push(id);
                 }
                 return;
             }
@@ -326,8 +342,10 @@ impl CanopyBroadPhase {
                 self.take_out_of_tree(&mut p);
                 self.stats.invalid += 1;
                 self.proxies[id as usize] = Some(p);
-                for other in self.pairs.remove_all(id) {
-                    self.push_delete(id, other, events);
+                for e in self.pairs.remove_all(id) {
+                    if e.live {
+                        self.push_delete(id, e.other, events);
+                    }
                 }
             } else {
                 self.proxies[id as usize] = Some(p);
@@ -335,6 +353,9 @@ impl CanopyBroadPhase {
             return;
         }
 
+        self.tights[id as usize] = tight;
+        self.is_touched[id as usize] = true;
+        self.touched.push(id);
         let mut moved = false;
         if p.filter != filter {
             let had_ff = p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED);
@@ -613,11 +634,11 @@ impl BroadPhase for CanopyBroadPhase {
             bits[word] |= 1 << (index % 64);
             generations[index] = generation;
         }
-        for word in 0..bits.len() {
-            while bits[word] != 0 {
-                let bit = bits[word].trailing_zeros();
-                bits[word] &= bits[word] - 1;
-                let index = word as u32 * 64 + bit;
+        for (w, word) in bits.iter_mut().enumerate() {
+            while *word != 0 {
+                let bit = word.trailing_zeros();
+                *word &= *word - 1;
+                let index = w as u32 * 64 + bit;
                 let handle = ColliderHandle::from_raw_parts(index, generations[index as usize]);
                 self.examine(params, colliders, bodies, handle, margin, events);
             }
@@ -647,35 +668,76 @@ impl BroadPhase for CanopyBroadPhase {
             let Some(p) = &self.proxies[id as usize] else {
                 continue;
             };
-            for &other in self.pairs.partners(id) {
-                let Some(o) = &self.proxies[other as usize] else {
+            for e in self.pairs.partners(id) {
+                let Some(o) = &self.proxies[e.other as usize] else {
                     continue;
                 };
                 if !p.fat.intersects(&o.fat) || !p.filter.may_pair(&o.filter) {
-                    gone.push((id, other));
+                    gone.push((id, e.other));
                 }
             }
         }
         for (a, b) in gone {
-            if self.pairs.remove(a, b) {
+            if self.pairs.remove(a, b) == Some(true) {
                 self.push_delete(a, b, events);
             }
         }
 
-        // 5. New pairs.
-        let found = self.find_new_pairs(&moved);
-        let deleted = events.len() - events_before;
-        for (a, b) in found {
-            if self.pairs.insert(a, b) {
-                let (a, b) = if a < b { (a, b) } else { (b, a) };
-                let (pa, pb) = (&self.proxies[a as usize], &self.proxies[b as usize]);
-                if let (Some(pa), Some(pb)) = (pa, pb) {
+        // 5. New candidates, live at once when their exact boxes overlap.
+        let mut added = 0;
+        for (a, b) in self.find_new_pairs(&moved) {
+            if !self.pairs.insert(a, b) {
+                continue;
+            }
+            let (x, y) = if a < b { (a, b) } else { (b, a) };
+            if let (Some(px), Some(py)) = (&self.proxies[x as usize], &self.proxies[y as usize]) {
+                if self.tights[x as usize].intersects(&self.tights[y as usize]) {
+                    self.pairs.set_live(x, y, true);
                     events.push(BroadPhasePairEvent::AddPair(ColliderPair::new(
-                        pa.handle, pb.handle,
+                        px.handle, py.handle,
                     )));
+                    added += 1;
                 }
             }
         }
+
+        // 6. Liveness: every collider Rapier reported re-checks its candidates that are not live
+        //    yet (new candidates were checked above). Live pairs end with their candidate.
+        let touched = std::mem::take(&mut self.touched);
+        let mut flips = Vec::new();
+        for &id in &touched {
+            if self.pairs.waiting(id) == 0 {
+                continue;
+            }
+            let tight = &self.tights[id as usize];
+            for e in self.pairs.partners(id) {
+                // A pair of two touched proxies is checked once, from its smaller id.
+                if e.live || (e.other < id && self.is_touched[e.other as usize]) {
+                    continue;
+                }
+                if tight.intersects(&self.tights[e.other as usize]) {
+                    flips.push((id, e.other));
+                }
+            }
+        }
+        for &id in &touched {
+            self.is_touched[id as usize] = false;
+        }
+        for (a, b) in flips {
+            if !self.pairs.set_live(a, b, true) {
+                let (x, y) = if a < b { (a, b) } else { (b, a) };
+                if let (Some(px), Some(py)) = (&self.proxies[x as usize], &self.proxies[y as usize])
+                {
+                    events.push(BroadPhasePairEvent::AddPair(ColliderPair::new(
+                        px.handle, py.handle,
+                    )));
+                    added += 1;
+                }
+            }
+        }
+        let deleted = events.len() - events_before - added;
+        self.touched = touched;
+        self.touched.clear();
 
         for &id in &moved {
             if let Some(p) = self.proxies[id as usize].as_mut() {
@@ -684,7 +746,7 @@ impl BroadPhase for CanopyBroadPhase {
         }
         self.stats.moved = moved.len();
         self.stats.deleted = deleted;
-        self.stats.added = events.len() - events_before - deleted;
+        self.stats.added = added;
         self.moved = moved;
         self.moved.clear();
     }

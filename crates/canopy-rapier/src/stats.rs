@@ -8,8 +8,10 @@ pub struct BroadPhaseStats {
     /// Colliders left out of the trees because their box has a NaN or infinite coordinate.
     /// They come back as soon as their box is valid again.
     pub invalid: usize,
-    /// Live pairs.
+    /// Live pairs: reported to Rapier, exact collision boxes overlapping.
     pub pairs: usize,
+    /// Candidate pairs: fat boxes overlapping (a superset of the live pairs).
+    pub candidates: usize,
     /// Proxies whose fat box or filter changed in the last update (the move buffer).
     pub moved: usize,
     /// `AddPair` events of the last update.
