@@ -121,11 +121,15 @@ fn run_scene(name: &str, size: Size, steps: usize, verify_every: usize) -> Row {
         let t = Instant::now();
         rapier.step();
         let rapier_step = t.elapsed().as_secs_f64();
-        let (canopy_bp, verify) = (canopy.broad_phase.meter.total_secs, canopy.broad_phase.meter.verify_secs);
+        let (canopy_bp, verify) = (
+            canopy.broad_phase.meter.total_secs,
+            canopy.broad_phase.meter.verify_secs,
+        );
         let t = Instant::now();
         canopy.step();
         // The truth check runs inside the step; it is not canopy's time.
-        let canopy_step = t.elapsed().as_secs_f64() - (canopy.broad_phase.meter.verify_secs - verify);
+        let canopy_step =
+            t.elapsed().as_secs_f64() - (canopy.broad_phase.meter.verify_secs - verify);
         per_step.push((
             rapier.broad_phase.meter.total_secs - rapier_bp,
             canopy.broad_phase.meter.total_secs - canopy_bp,
