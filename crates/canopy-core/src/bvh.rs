@@ -76,6 +76,70 @@ impl Node {
     }
 }
 
+/// Both children of one interior node side by side in one 64-byte cache line, so that the pair
+/// walk and the ray traversal test both children of a node from one line. A child that is an
+/// interior node has `count == 0` and `first` = the index of *its* `Wide` (not a node index);
+/// a leaf child is the leaf node itself. `wide[0]` holds the root (twice); interior node `k` in
+/// depth-first order (root `k = 0`) has its children in `wide[k + 1]`. A child is addressed
+/// as `2 * wide index + side` (root: 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct Wide(pub(crate) [Node; 2]);
+
+const _: () = assert!(std::mem::size_of::<Wide>() == 64);
+
+/// The wide array of the depth-first `nodes` (see [`Wide`]).
+pub(crate) fn make_wide(nodes: &[Node]) -> Vec<Wide> {
+    if nodes.is_empty() {
+        return Vec::new();
+    }
+    // Wide index of each interior node: 1 + its rank among interior nodes.
+    let mut rank = Vec::with_capacity(nodes.len());
+    let mut k = 1u32;
+    for n in nodes {
+        rank.push(k);
+        k += u32::from(!n.is_leaf());
+    }
+    let remap = |j: usize| {
+        let n = nodes[j];
+        if n.is_leaf() {
+            n
+        } else {
+            Node::interior(n.min, n.max, rank[j])
+        }
+    };
+    let mut wide = Vec::with_capacity(k as usize);
+    wide.push(Wide([remap(0), remap(0)]));
+    for (i, n) in nodes.iter().enumerate() {
+        if !n.is_leaf() {
+            wide.push(Wide([remap(i + 1), remap(n.right() as usize)]));
+        }
+    }
+    wide
+}
+
+/// Copies the node boxes of `nodes` into `wide` (same topology).
+pub(crate) fn refresh_wide(nodes: &[Node], wide: &mut [Wide]) {
+    let Some(root) = nodes.first() else {
+        return;
+    };
+    let set = |e: &mut Node, n: &Node| {
+        e.min = n.min;
+        e.max = n.max;
+    };
+    set(&mut wide[0].0[0], root);
+    set(&mut wide[0].0[1], root);
+    let mut w = 1;
+    for (i, n) in nodes.iter().enumerate() {
+        if !n.is_leaf() {
+            let e = &mut wide[w].0;
+            set(&mut e[0], &nodes[i + 1]);
+            set(&mut e[1], &nodes[n.right() as usize]);
+            w += 1;
+        }
+    }
+}
+
 /// A primitive's box stored in leaf order next to its index, so that leaf tests read
 /// contiguous memory and never call back into user data.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -110,6 +174,9 @@ pub struct Bvh {
     /// Inverse of `prim_indices`: the slot of each primitive. Empty after a build;
     /// `refit_primitives` makes it when first needed (most users never need it).
     pub(crate) slot_of: Vec<u32>,
+    /// Both children of each interior node in one cache line (see [`Wide`]), for the pair walk
+    /// and the ray casts; made with the tree and refit with it.
+    pub(crate) wide: Vec<Wide>,
 }
 
 impl Bvh {

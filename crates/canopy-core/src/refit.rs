@@ -111,5 +111,6 @@ impl Bvh {
             self.nodes[i].min = b.min;
             self.nodes[i].max = b.max;
         }
+        crate::bvh::refresh_wide(&self.nodes, &mut self.wide);
     }
 }

@@ -289,11 +289,13 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
         depth: 0,
     };
     build_node(task, bounds, &mut nodes, &ctx);
+    let wide = crate::bvh::make_wide(&nodes);
     Bvh {
         nodes,
         prim_indices,
         prim_bounds,
         slot_of: Vec::new(),
+        wide,
     }
 }
 

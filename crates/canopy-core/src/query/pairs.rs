@@ -15,7 +15,7 @@
 
 use crate::aabb::overlaps;
 use crate::build::f4::{node_box, overlap, prim_box};
-use crate::bvh::{Bvh, Node};
+use crate::bvh::{Bvh, Node, Wide};
 use rayon::prelude::*;
 
 /// The parallel pair queries split the work into at least this many tasks (a fixed number, so
@@ -351,6 +351,191 @@ fn prim_query<const SELF: bool, const SWAP: bool, MP: Mask, MQ: Mask>(
     }
 }
 
+/// The child entry `r` (`2 * wide index + side`) of a tree's wide array.
+#[inline(always)]
+fn ent(w: &[Wide], r: u32) -> &Node {
+    &w[(r >> 1) as usize].0[(r & 1) as usize]
+}
+
+/// Reports the pair of slots `s` (first tree) and `u` (second tree).
+#[inline(always)]
+fn report<const SELF: bool, const SWAP: bool>(ip: u32, iq: u32, f: &mut impl FnMut(u32, u32)) {
+    if SELF {
+        f(ip.min(iq), ip.max(iq));
+    } else if SWAP {
+        f(iq, ip);
+    } else {
+        f(ip, iq);
+    }
+}
+
+/// The unmarked pair walk on the wide array (see [`Wide`]): a task is two child entries whose
+/// boxes overlap (or an entry against itself in a self walk), and both children of a node are
+/// tested from one cache line. A leaf of one primitive has that primitive's box, so two such
+/// leaves pushed as overlapping are reported without another test.
+fn wwalk<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, f: &mut impl FnMut(u32, u32)) {
+    let (w1, w2) = (&t1.wide[..], &t2.wide[..]);
+    let mut stack: Vec<Task> = Vec::with_capacity(128);
+    let mut qstack: Vec<u32> = Vec::with_capacity(64);
+    stack.push(start);
+    while let Some((a, b)) = stack.pop() {
+        let na = ent(w1, a);
+        if SELF && a == b {
+            if na.is_leaf() {
+                leaf_pairs::<SELF>(t1, na, t2, na, f);
+                continue;
+            }
+            let c = na.first;
+            let [l, r] = &w1[c as usize].0;
+            let (lr, rr) = (2 * c, 2 * c + 1);
+            // A leaf of one primitive has no pairs of its own.
+            if r.count != 1 {
+                stack.push((rr, rr));
+            }
+            if l.count != 1 {
+                stack.push((lr, lr));
+            }
+            if nodes_overlap(l, r) {
+                stack.push((lr, rr));
+            }
+            continue;
+        }
+        let nb = ent(w2, b);
+        match (na.is_leaf(), nb.is_leaf()) {
+            (true, true) => {
+                if na.count == 1 && nb.count == 1 {
+                    let (ip, iq) = (
+                        t1.prim_indices[na.first as usize],
+                        t2.prim_indices[nb.first as usize],
+                    );
+                    report::<SELF, false>(ip, iq, f);
+                } else {
+                    leaf_pairs::<SELF>(t1, na, t2, nb, f);
+                }
+            }
+            (true, false) if na.count == 1 => {
+                wprim_query::<SELF, false>(t1, na, t2, nb.first, &mut qstack, f);
+            }
+            (false, true) if nb.count == 1 => {
+                wprim_query::<SELF, true>(t2, nb, t1, na.first, &mut qstack, f);
+            }
+            (true, false) => {
+                let c = nb.first;
+                let (alo, ahi) = node_box(na);
+                for side in [1, 0] {
+                    let (clo, chi) = node_box(&w2[c as usize].0[side as usize]);
+                    if overlap(alo, ahi, clo, chi) {
+                        stack.push((a, 2 * c + side));
+                    }
+                }
+            }
+            (false, true) => {
+                let c = na.first;
+                let (blo, bhi) = node_box(nb);
+                for side in [1, 0] {
+                    let (clo, chi) = node_box(&w1[c as usize].0[side as usize]);
+                    if overlap(clo, chi, blo, bhi) {
+                        stack.push((2 * c + side, b));
+                    }
+                }
+            }
+            (false, false) => {
+                let (ca, cb) = (na.first, nb.first);
+                let [b0, b1] = &w2[cb as usize].0;
+                let (b0lo, b0hi) = node_box(b0);
+                let (b1lo, b1hi) = node_box(b1);
+                for side in [1, 0] {
+                    let (clo, chi) = node_box(&w1[ca as usize].0[side as usize]);
+                    let c = 2 * ca + side;
+                    if overlap(clo, chi, b1lo, b1hi) {
+                        stack.push((c, 2 * cb + 1));
+                    }
+                    if overlap(clo, chi, b0lo, b0hi) {
+                        stack.push((c, 2 * cb));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Pairs of two leaves whose boxes overlap (in a self walk, `na` and `nb` the same leaf means
+/// the pairs within it).
+#[inline(always)]
+fn leaf_pairs<const SELF: bool>(
+    t1: &Bvh,
+    na: &Node,
+    t2: &Bvh,
+    nb: &Node,
+    f: &mut impl FnMut(u32, u32),
+) {
+    let same = SELF && std::ptr::eq(na, nb);
+    for s in na.leaf_range() {
+        let (plo, phi) = prim_box(&t1.prim_bounds[s]);
+        let us = if same {
+            s + 1..nb.leaf_range().end
+        } else {
+            nb.leaf_range()
+        };
+        for u in us {
+            let (ulo, uhi) = prim_box(&t2.prim_bounds[u]);
+            if overlap(plo, phi, ulo, uhi) {
+                report::<SELF, false>(t1.prim_indices[s], t2.prim_indices[u], f);
+            }
+        }
+    }
+}
+
+/// Reports the pairs of the one-primitive leaf `leaf` of `tp` with the primitives under wide
+/// node `root` of `tq` (whose parent entry the leaf overlaps). `SWAP`: `tp` is the second tree
+/// of the walk. `qstack` is scratch.
+#[inline(always)]
+fn wprim_query<const SELF: bool, const SWAP: bool>(
+    tp: &Bvh,
+    leaf: &Node,
+    tq: &Bvh,
+    root: u32,
+    qstack: &mut Vec<u32>,
+    f: &mut impl FnMut(u32, u32),
+) {
+    let (plo, phi) = node_box(leaf);
+    let ip = tp.prim_indices[leaf.first as usize];
+    let wide = &tq.wide[..];
+    qstack.clear();
+    let mut cur = root as usize;
+    loop {
+        let [l, r] = &wide[cur].0;
+        let (llo, lhi) = node_box(l);
+        let (rlo, rhi) = node_box(r);
+        let ol = overlap(plo, phi, llo, lhi);
+        let or = overlap(plo, phi, rlo, rhi);
+        let mut next = None;
+        for (o, c) in [(ol, l), (or, r)] {
+            if !o {
+                continue;
+            }
+            if !c.is_leaf() {
+                if let Some(n) = next.replace(c.first) {
+                    qstack.push(n);
+                }
+            } else if c.count == 1 {
+                report::<SELF, SWAP>(ip, tq.prim_indices[c.first as usize], f);
+            } else {
+                for u in c.leaf_range() {
+                    let (ulo, uhi) = prim_box(&tq.prim_bounds[u]);
+                    if overlap(plo, phi, ulo, uhi) {
+                        report::<SELF, SWAP>(ip, tq.prim_indices[u], f);
+                    }
+                }
+            }
+        }
+        match next.or_else(|| qstack.pop()) {
+            Some(c) => cur = c as usize,
+            None => return,
+        }
+    }
+}
+
 /// Breadth-first expansion of `start` into at least `target` tasks (fewer when the trees run
 /// out of nodes). Depends only on the trees.
 fn split_tasks<const SELF: bool, M1: Mask, M2: Mask>(
@@ -429,8 +614,8 @@ impl Bvh {
     /// # Ok::<(), canopy_core::BvhError>(())
     /// ```
     pub fn self_pairs(&self, mut f: impl FnMut(u32, u32)) {
-        if !self.nodes.is_empty() {
-            walk::<true, All, All>(self, &All, self, &All, (0, 0), &mut f);
+        if !self.wide.is_empty() {
+            wwalk::<true>(self, self, (0, 0), &mut f);
         }
     }
 
@@ -473,7 +658,7 @@ impl Bvh {
     /// ```
     pub fn pairs_with(&self, other: &Bvh, mut f: impl FnMut(u32, u32)) {
         if let Some(start) = self.root_task(other) {
-            walk::<false, All, All>(self, &All, other, &All, start, &mut f);
+            wwalk::<false>(self, other, start, &mut f);
         }
     }
 

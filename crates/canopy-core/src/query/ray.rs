@@ -3,7 +3,7 @@
 //! the exact primitive test; the stored primitive boxes cull first.
 
 use super::Stack;
-use crate::bvh::Bvh;
+use crate::bvh::{Bvh, Node};
 use crate::ray::Ray;
 
 /// A ray hit: which primitive, at what time (`ray.origin + t * ray.dir`).
@@ -80,12 +80,15 @@ impl Bvh {
             return None;
         }
         ray.slab(&root.min, &root.max, t_max)?;
+        let slab = SignedSlab::new(ray);
+        let wide = &self.wide;
         let mut best: Option<RayHit> = None;
         let mut best_t = t_max;
         let mut stack: Stack<(u32, f32)> = Stack::new();
+        // Current child reference (`2 * wide index + side`, see `Wide`): the root first.
         let mut cur = 0usize;
         loop {
-            let node = &self.nodes[cur];
+            let node = &wide[cur >> 1].0[cur & 1];
             if node.is_leaf() {
                 // A leaf of one primitive has that primitive's box (builders and refit make
                 // leaf boxes from their primitives), which the ray was just seen to enter
@@ -108,10 +111,12 @@ impl Bvh {
                     }
                 }
             } else {
-                let (l, r) = (cur + 1, node.right() as usize);
-                let (ln, rn) = (&self.nodes[l], &self.nodes[r]);
-                let tl = ray.slab(&ln.min, &ln.max, best_t);
-                let tr = ray.slab(&rn.min, &rn.max, best_t);
+                // Both children from one cache line.
+                let w = node.first as usize;
+                let [ln, rn] = &wide[w].0;
+                let tl = slab.entry(ln, best_t);
+                let tr = slab.entry(rn, best_t);
+                let (l, r) = (2 * w, 2 * w + 1);
                 match (tl, tr) {
                     (Some(a), Some(b)) => {
                         let (near, far, tfar) = if a <= b { (l, r, b) } else { (r, l, a) };
@@ -141,5 +146,43 @@ impl Bvh {
                 }
             }
         }
+    }
+}
+
+/// The slab test with the near and far plane of each axis chosen once per ray by the sign of
+/// the direction: three subtractions and multiplications per plane set, no min/max per axis.
+struct SignedSlab {
+    origin: [f32; 3],
+    inv: [f32; 3],
+    neg: [bool; 3],
+}
+
+impl SignedSlab {
+    #[inline(always)]
+    fn new(ray: &Ray) -> Self {
+        let inv = [ray.inv_dir.x, ray.inv_dir.y, ray.inv_dir.z];
+        Self {
+            origin: [ray.origin.x, ray.origin.y, ray.origin.z],
+            inv,
+            neg: inv.map(f32::is_sign_negative),
+        }
+    }
+
+    /// Entry time into the node's box within `[0, t_max]`, or `None`. Same result as
+    /// `Ray::slab` (a NaN plane time, from `0 * inf`, is dropped by `f32::max`/`min`).
+    #[inline(always)]
+    fn entry(&self, n: &Node, t_max: f32) -> Option<f32> {
+        let mut t0 = 0.0f32;
+        let mut t1 = t_max;
+        for i in 0..3 {
+            let (near, far) = if self.neg[i] {
+                (n.max[i], n.min[i])
+            } else {
+                (n.min[i], n.max[i])
+            };
+            t0 = t0.max((near - self.origin[i]) * self.inv[i]);
+            t1 = t1.min((far - self.origin[i]) * self.inv[i]);
+        }
+        (t0 <= t1).then_some(t0)
     }
 }
