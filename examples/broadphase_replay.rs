@@ -5,7 +5,7 @@
 //!
 //! `cargo run --release --example broadphase_replay -- SCENE rapier|canopy [STEPS] [small|full]`
 //! (canopy's margin and velocity stretch can be overridden with `CANOPY_MARGIN` and
-//! `CANOPY_VELOCITY_STEPS`).
+//! `CANOPY_VELOCITY_STEPS`, `CANOPY_PENDING_FRACTION`, `CANOPY_DEAD_FRACTION`).
 
 use canopy::rapier::CanopyBroadPhase;
 use canopy::scenes::harness::{replay, Recorder};
@@ -42,6 +42,12 @@ fn main() {
             }
             if let Some(v) = var("CANOPY_VELOCITY_STEPS") {
                 config.velocity_steps = v;
+            }
+            if let Some(v) = var("CANOPY_PENDING_FRACTION") {
+                config.rebuild.pending_fraction = v as f64;
+            }
+            if let Some(v) = var("CANOPY_DEAD_FRACTION") {
+                config.rebuild.max_dead_fraction = v as f64;
             }
             Box::new(CanopyBroadPhase::with_config(config))
         }
