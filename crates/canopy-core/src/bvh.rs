@@ -88,6 +88,19 @@ pub(crate) struct Wide(pub(crate) [Node; 2]);
 
 const _: () = assert!(std::mem::size_of::<Wide>() == 64);
 
+/// `wide[i]` without a bounds check, for the traversal loops.
+///
+/// Every child reference stored in a wide array is made by [`make_wide`] from the tree's own
+/// topology and indexes that array; the traversals only follow such references (or start at the
+/// root, index 0, of a non-empty array), and the array is only ever replaced or refit as a
+/// whole with its tree.
+#[inline(always)]
+pub(crate) fn wide_at(wide: &[Wide], i: usize) -> &Wide {
+    debug_assert!(i < wide.len());
+    // SAFETY: see above: `i` is a reference read from `wide` itself, or 0 in a non-empty array.
+    unsafe { wide.get_unchecked(i) }
+}
+
 /// The wide array of the depth-first `nodes` (see [`Wide`]).
 pub(crate) fn make_wide(nodes: &[Node]) -> Vec<Wide> {
     if nodes.is_empty() {

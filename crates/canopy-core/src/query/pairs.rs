@@ -15,7 +15,7 @@
 
 use crate::aabb::overlaps;
 use crate::build::f4::{node_box, overlap, prim_box};
-use crate::bvh::{Bvh, Node, Wide};
+use crate::bvh::{wide_at, Bvh, Node, Wide};
 use rayon::prelude::*;
 
 /// The parallel pair queries split the work into at least this many tasks (a fixed number, so
@@ -354,7 +354,7 @@ fn prim_query<const SELF: bool, const SWAP: bool, MP: Mask, MQ: Mask>(
 /// The child entry `r` (`2 * wide index + side`) of a tree's wide array.
 #[inline(always)]
 fn ent(w: &[Wide], r: u32) -> &Node {
-    &w[(r >> 1) as usize].0[(r & 1) as usize]
+    &wide_at(w, (r >> 1) as usize).0[(r & 1) as usize]
 }
 
 /// Reports the pair of slots `s` (first tree) and `u` (second tree).
@@ -386,7 +386,7 @@ fn wwalk<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, f: &mut impl FnMut(u
                 continue;
             }
             let c = na.first;
-            let [l, r] = &w1[c as usize].0;
+            let [l, r] = &wide_at(w1, c as usize).0;
             let (lr, rr) = (2 * c, 2 * c + 1);
             // A leaf of one primitive has no pairs of its own.
             if r.count != 1 {
@@ -396,7 +396,7 @@ fn wwalk<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, f: &mut impl FnMut(u
                 stack.push((lr, lr));
             }
             if nodes_overlap(l, r) {
-                stack.push((lr, rr));
+                found::<SELF>(t1, t2, &mut stack, (l, lr), (r, rr), f);
             }
             continue;
         }
@@ -423,9 +423,10 @@ fn wwalk<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, f: &mut impl FnMut(u
                 let c = nb.first;
                 let (alo, ahi) = node_box(na);
                 for side in [1, 0] {
-                    let (clo, chi) = node_box(&w2[c as usize].0[side as usize]);
+                    let e = &wide_at(w2, c as usize).0[side as usize];
+                    let (clo, chi) = node_box(e);
                     if overlap(alo, ahi, clo, chi) {
-                        stack.push((a, 2 * c + side));
+                        found::<SELF>(t1, t2, &mut stack, (na, a), (e, 2 * c + side), f);
                     }
                 }
             }
@@ -433,29 +434,53 @@ fn wwalk<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, f: &mut impl FnMut(u
                 let c = na.first;
                 let (blo, bhi) = node_box(nb);
                 for side in [1, 0] {
-                    let (clo, chi) = node_box(&w1[c as usize].0[side as usize]);
+                    let e = &wide_at(w1, c as usize).0[side as usize];
+                    let (clo, chi) = node_box(e);
                     if overlap(clo, chi, blo, bhi) {
-                        stack.push((2 * c + side, b));
+                        found::<SELF>(t1, t2, &mut stack, (e, 2 * c + side), (nb, b), f);
                     }
                 }
             }
             (false, false) => {
                 let (ca, cb) = (na.first, nb.first);
-                let [b0, b1] = &w2[cb as usize].0;
+                let [b0, b1] = &wide_at(w2, cb as usize).0;
                 let (b0lo, b0hi) = node_box(b0);
                 let (b1lo, b1hi) = node_box(b1);
                 for side in [1, 0] {
-                    let (clo, chi) = node_box(&w1[ca as usize].0[side as usize]);
+                    let e = &wide_at(w1, ca as usize).0[side as usize];
+                    let (clo, chi) = node_box(e);
                     let c = 2 * ca + side;
                     if overlap(clo, chi, b1lo, b1hi) {
-                        stack.push((c, 2 * cb + 1));
+                        found::<SELF>(t1, t2, &mut stack, (e, c), (b1, 2 * cb + 1), f);
                     }
                     if overlap(clo, chi, b0lo, b0hi) {
-                        stack.push((c, 2 * cb));
+                        found::<SELF>(t1, t2, &mut stack, (e, c), (b0, 2 * cb), f);
                     }
                 }
             }
         }
+    }
+}
+
+/// Two overlapping entries found by the walk: reported at once when both are leaves of one
+/// primitive (whose boxes are those primitives' boxes), else pushed as a task.
+#[inline(always)]
+fn found<const SELF: bool>(
+    t1: &Bvh,
+    t2: &Bvh,
+    stack: &mut Vec<Task>,
+    (ea, ra): (&Node, u32),
+    (eb, rb): (&Node, u32),
+    f: &mut impl FnMut(u32, u32),
+) {
+    if ea.count == 1 && eb.count == 1 {
+        let (ip, iq) = (
+            t1.prim_indices[ea.first as usize],
+            t2.prim_indices[eb.first as usize],
+        );
+        report::<SELF, false>(ip, iq, f);
+    } else {
+        stack.push((ra, rb));
     }
 }
 
@@ -504,7 +529,7 @@ fn wprim_query<const SELF: bool, const SWAP: bool>(
     qstack.clear();
     let mut cur = root as usize;
     loop {
-        let [l, r] = &wide[cur].0;
+        let [l, r] = &wide_at(wide, cur).0;
         let (llo, lhi) = node_box(l);
         let (rlo, rhi) = node_box(r);
         let ol = overlap(plo, phi, llo, lhi);

@@ -3,7 +3,7 @@
 //! the exact primitive test; the stored primitive boxes cull first.
 
 use super::Stack;
-use crate::bvh::{Bvh, Node};
+use crate::bvh::{wide_at, Bvh, Node};
 use crate::ray::Ray;
 
 /// A ray hit: which primitive, at what time (`ray.origin + t * ray.dir`).
@@ -88,7 +88,7 @@ impl Bvh {
         // Current child reference (`2 * wide index + side`, see `Wide`): the root first.
         let mut cur = 0usize;
         loop {
-            let node = &wide[cur >> 1].0[cur & 1];
+            let node = &wide_at(wide, cur >> 1).0[cur & 1];
             if node.is_leaf() {
                 // A leaf of one primitive has that primitive's box (builders and refit make
                 // leaf boxes from their primitives), which the ray was just seen to enter
@@ -113,7 +113,7 @@ impl Bvh {
             } else {
                 // Both children from one cache line.
                 let w = node.first as usize;
-                let [ln, rn] = &wide[w].0;
+                let [ln, rn] = &wide_at(wide, w).0;
                 let tl = slab.entry(ln, best_t);
                 let tr = slab.entry(rn, best_t);
                 let (l, r) = (2 * w, 2 * w + 1);
