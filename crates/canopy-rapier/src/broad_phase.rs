@@ -397,29 +397,73 @@ impl CanopyBroadPhase {
         }
     }
 
-    /// Step 5 for the pending proxies (not in a BVH yet): against BVH members, one query each
-    /// on every tree they may pair with; among themselves, one sweep along x.
-    fn pending_pairs(&self, out: &mut Vec<(u32, u32)>) {
+    /// Step 5 for the pending proxies (not in a BVH yet): against BVH members, a marked walk of
+    /// each pending tree against each member tree (pairs where either side moved); among
+    /// themselves, one sweep along x.
+    fn pending_pairs(&self, marks: &[Option<PairMarks>; 3], out: &mut Vec<(u32, u32)>) {
         let mut pending: Vec<(f32, u32)> = Vec::new();
         for t in &self.trees {
             for &id in &t.pending {
-                let Some(p) = &self.proxies[id as usize] else {
-                    continue;
-                };
-                pending.push((p.fat.min.x, id));
-                for m in Mobility::ALL {
-                    let tree = &self.trees[m as usize];
-                    if tree.members.is_empty() || !self.may_query(p, m) {
-                        continue;
-                    }
-                    tree.query_members(&p.fat, |other| {
-                        if let Some(o) = &self.proxies[other as usize] {
-                            if p.filter.may_pair(&o.filter) {
-                                out.push((id, other));
-                            }
-                        }
-                    });
+                if let Some(p) = &self.proxies[id as usize] {
+                    pending.push((p.fat.min.x, id));
                 }
+            }
+        }
+        if pending.is_empty() {
+            return;
+        }
+        for a in Mobility::ALL {
+            let ta = &self.trees[a as usize];
+            if ta.pending.is_empty() {
+                continue;
+            }
+            let Some(pending_bvh) = ta.pending_bvh() else {
+                // No pending tree (its build failed, which valid fat boxes never make it do):
+                // one query per pending proxy instead.
+                for &id in &ta.pending {
+                    let Some(p) = &self.proxies[id as usize] else {
+                        continue;
+                    };
+                    for b in Mobility::ALL {
+                        let tb = &self.trees[b as usize];
+                        if tb.members.is_empty() || !self.may_query(p, b) {
+                            continue;
+                        }
+                        tb.query_members(&p.fat, |other| {
+                            if let Some(o) = &self.proxies[other as usize] {
+                                if p.filter.may_pair(&o.filter) {
+                                    out.push((id, other));
+                                }
+                            }
+                        });
+                    }
+                }
+                continue;
+            };
+            let pending_marks = pending_bvh.marks(|i| {
+                self.proxies[ta.pending[i as usize] as usize]
+                    .as_ref()
+                    .is_some_and(|p| p.moved)
+            });
+            for b in Mobility::ALL {
+                let tb = &self.trees[b as usize];
+                if tb.members.is_empty() || !self.trees_may_pair(a, b) {
+                    continue;
+                }
+                let member_marks = marks[b as usize].as_ref().unwrap_or(&tb.no_marks);
+                pending_bvh.pairs_with_marked(&pending_marks, &tb.bvh, member_marks, |i, j| {
+                    let (id, other) = (ta.pending[i as usize], tb.members[j as usize]);
+                    if other == DEAD {
+                        return;
+                    }
+                    if let (Some(p), Some(o)) =
+                        (&self.proxies[id as usize], &self.proxies[other as usize])
+                    {
+                        if p.filter.may_pair(&o.filter) {
+                            out.push((id, other));
+                        }
+                    }
+                });
             }
         }
         // Sweep and prune: sorted by min x (ties by id, for a deterministic order), each box
@@ -504,9 +548,16 @@ impl CanopyBroadPhase {
             .filter(in_trees)
             .count();
         let members: usize = self.trees.iter().map(|t| t.members.len()).sum();
-        if moved_members * SPARSE_MOVES < members {
+        let sparse = moved_members * SPARSE_MOVES < members;
+        let has_pending = self.trees.iter().any(|t| !t.pending.is_empty());
+        let marks = if sparse && !has_pending {
+            [None, None, None]
+        } else {
+            self.member_marks(moved)
+        };
+        let mut found = Vec::new();
+        if sparse {
             // Few moved: one query each beats a walk over trees that are mostly unmarked.
-            let mut found = Vec::new();
             for &id in moved {
                 if self.proxies[id as usize]
                     .as_ref()
@@ -515,9 +566,15 @@ impl CanopyBroadPhase {
                     self.member_pairs(id, &mut found);
                 }
             }
-            self.pending_pairs(&mut found);
-            return found;
+        } else {
+            self.walk_members(&marks, &mut found);
         }
+        self.pending_pairs(&marks, &mut found);
+        found
+    }
+
+    /// Marks of the moved BVH members, per tree (`None`: nothing moved there).
+    fn member_marks(&mut self, moved: &[u32]) -> [Option<PairMarks>; 3] {
         let mut marked = [false; 3];
         for &id in moved {
             if let Some(p) = &self.proxies[id as usize] {
@@ -541,9 +598,13 @@ impl CanopyBroadPhase {
                 }
             }
         }
+        marks
+    }
 
+    /// One marked pair walk per pair of trees that may pair: every pair of BVH members with a
+    /// moved one.
+    fn walk_members(&self, marks: &[Option<PairMarks>; 3], found: &mut Vec<(u32, u32)>) {
         let parallel = self.config.parallel;
-        let mut found = Vec::new();
         use Mobility::*;
         for (a, b) in [
             (Dynamic, Dynamic),
@@ -588,8 +649,6 @@ impl CanopyBroadPhase {
                 (false, false) => ta.bvh.pairs_with_marked(ma, &tb.bvh, mb, &mut keep),
             }
         }
-        self.pending_pairs(&mut found);
-        found
     }
 }
 

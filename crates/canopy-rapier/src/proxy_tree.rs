@@ -22,6 +22,10 @@ pub(crate) struct ProxyTree {
     /// Proxy id of each BVH slot, or [`DEAD`].
     pub members: Vec<u32>,
     pub pending: Vec<u32>,
+    /// A tree over the pending proxies' fat boxes (primitive `i` is `pending[i]`), rebuilt by
+    /// every `maintain`; `None` from [`ProxyTree::pending_bvh`] when stale.
+    pending_bvh: Bvh,
+    pending_fresh: bool,
     pub dead: usize,
     /// Refits since the SAH cost was last compared with the cost after the build.
     refits_since_check: u32,
@@ -45,6 +49,7 @@ impl ProxyTree {
     pub fn insert(&mut self, id: u32, proxy: &mut Proxy) {
         proxy.loc = Loc::Pending(self.pending.len() as u32);
         self.pending.push(id);
+        self.pending_fresh = false;
         self.summary.add(&proxy.filter);
     }
 
@@ -58,6 +63,7 @@ impl ProxyTree {
             }
             Loc::Pending(i) => {
                 self.pending.swap_remove(i as usize);
+                self.pending_fresh = false;
                 self.pending.get(i as usize).map(|&other| (other, i))
             }
             Loc::Out => None,
@@ -84,6 +90,38 @@ impl ProxyTree {
 
     /// Brings the BVH up to date: rebuild or refit as the policy says.
     pub fn maintain(
+        &mut self,
+        proxies: &mut [Option<Proxy>],
+        policy: &RebuildPolicy,
+        builder: Builder,
+        parallel: bool,
+    ) {
+        self.maintain_members(proxies, policy, builder, parallel);
+        self.pending_fresh = false;
+        if !self.pending.is_empty() {
+            let boxes: Vec<Aabb> = self
+                .pending
+                .iter()
+                .map(|&id| proxies[id as usize].as_ref().map_or(Aabb::EMPTY, |p| p.fat))
+                .collect();
+            let options = BuildOptions {
+                builder: Builder::Lbvh,
+                parallel: false,
+                ..Default::default()
+            };
+            if let Ok(bvh) = Bvh::build(&boxes, options) {
+                self.pending_bvh = bvh;
+                self.pending_fresh = true;
+            }
+        }
+    }
+
+    /// The tree over the pending proxies, when it matches them (after `maintain`).
+    pub fn pending_bvh(&self) -> Option<&Bvh> {
+        (self.pending_fresh && !self.pending.is_empty()).then_some(&self.pending_bvh)
+    }
+
+    fn maintain_members(
         &mut self,
         proxies: &mut [Option<Proxy>],
         policy: &RebuildPolicy,
@@ -121,6 +159,7 @@ impl ProxyTree {
             .filter(|&m| m != DEAD)
             .collect();
         members.append(&mut self.pending);
+        self.pending_fresh = false;
         let mut boxes = Vec::with_capacity(members.len());
         self.changes.clear();
         self.refits_since_check = 0;
@@ -154,6 +193,7 @@ impl ProxyTree {
                     }
                 }
                 self.pending = members;
+                self.pending_fresh = false;
             }
         }
         self.no_marks = self.bvh.marks(|_| false);
