@@ -200,7 +200,7 @@ impl Bvh {
     /// # Errors
     /// [`BvhError::InvalidAabb`] naming the first box with a NaN or infinite coordinate or
     /// `min > max`; [`BvhError::InvalidOptions`] for a zero leaf size or a bin count outside
-    /// `2..=64`; [`BvhError::TooManyPrimitives`] beyond `u32::MAX - 1` boxes.
+    /// `2..=32`; [`BvhError::TooManyPrimitives`] beyond `u32::MAX - 1` boxes.
     ///
     /// # Example
     /// ```
