@@ -9,12 +9,18 @@
 //!    left its fat box, whose filter changed, or that is new, goes into the move buffer.
 //!    Invalid boxes (NaN, infinite) take the proxy out of the trees and delete its pairs.
 //! 3. Trees are refit or rebuilt (`proxy_tree.rs`).
-//! 4. Deletions: only pairs of moved proxies are checked; a pair goes when the fat boxes
-//!    separate or the filter now rejects it.
-//! 5. New pairs: moved proxies are marked in their tree, and one marked pair walk per pair of
-//!    trees that may pair (never fixed-fixed unless some collider enables it) finds every pair
-//!    with a moved proxy, skipping subtrees without one (parallel walks give the same order
-//!    with any thread count). Proxies added since the last rebuild query the trees instead.
+//! 4. Deletions: only candidate pairs (fat boxes overlapping, see `pair_set.rs`) of moved
+//!    proxies are checked; a candidate goes when the fat boxes separate or the filter now
+//!    rejects it, with `DeletePair` if it was live.
+//! 5. New candidates: moved proxies are marked in their tree, and one marked pair walk per
+//!    pair of trees that may pair (never fixed-fixed unless some collider enables it) finds
+//!    every pair with a moved proxy, skipping subtrees without one (parallel walks give the
+//!    same order with any thread count); with few moves, one query per moved proxy instead.
+//!    Proxies added since the last rebuild have a small tree of their own, walked with marks
+//!    against the member trees, and are swept and pruned among themselves. A new candidate
+//!    whose exact boxes overlap is live at once (`AddPair`).
+//! 6. Liveness: every collider Rapier reported checks its candidates that are not live yet;
+//!    those whose exact boxes now overlap become live (`AddPair`).
 
 use crate::config::CanopyBroadPhaseConfig;
 use crate::filter::{FilterData, Mobility};

@@ -1,7 +1,8 @@
 //! One tree of proxies (fixed, kinematic or dynamic): a canopy-core [`Bvh`] over fat boxes,
-//! a pending list for proxies added since the last build, and dead slots for proxies removed
-//! since then. Refit when boxes change; rebuilt when the pending list or the dead slots grow
-//! too large, or the SAH cost has drifted (see [`crate::RebuildPolicy`]).
+//! a pending list (with a small tree rebuilt every update) for proxies added since the last
+//! build, and dead slots for proxies removed since then. Refit when boxes change; rebuilt when
+//! the pending list or the dead slots grow too large, or the SAH cost has drifted (see
+//! [`crate::RebuildPolicy`]).
 
 use crate::config::RebuildPolicy;
 use crate::filter::TreeFilterSummary;
