@@ -5,7 +5,8 @@
 //!
 //! `cargo run --release --example broadphase_replay -- SCENE rapier|canopy [STEPS] [small|full]`
 //! (canopy's margin and velocity stretch can be overridden with `CANOPY_MARGIN` and
-//! `CANOPY_VELOCITY_STEPS`, `CANOPY_PENDING_FRACTION`, `CANOPY_DEAD_FRACTION`).
+//! `CANOPY_VELOCITY_STEPS`, `CANOPY_PENDING_FRACTION`, `CANOPY_DEAD_FRACTION`,
+//! `CANOPY_COST_GROWTH`, and `CANOPY_MOVING_SAH` to build moving trees with binned SAH).
 
 use canopy::rapier::CanopyBroadPhase;
 use canopy::scenes::harness::{replay, Recorder};
@@ -45,6 +46,12 @@ fn main() {
             }
             if let Some(v) = var("CANOPY_PENDING_FRACTION") {
                 config.rebuild.pending_fraction = v as f64;
+            }
+            if std::env::var_os("CANOPY_MOVING_SAH").is_some() {
+                config.rebuild.moving_builder = canopy::core::Builder::BinnedSah;
+            }
+            if let Some(v) = var("CANOPY_COST_GROWTH") {
+                config.rebuild.max_cost_growth = v as f64;
             }
             if let Some(v) = var("CANOPY_DEAD_FRACTION") {
                 config.rebuild.max_dead_fraction = v as f64;
