@@ -272,8 +272,12 @@ impl CanopyBroadPhase {
             if enabled && p.handle == handle && p.is_valid() && p.filter.same_as(collider, parent) {
                 let tight = Self::collision_aabb(params, collider, parent);
                 self.tights[id as usize] = tight;
-                self.is_touched[id as usize] = true;
-                self.touched.push(id);
+                // Only proxies with candidates not live yet have anything to check in step 6
+                // (a non-live candidate counts at both ends, and new ones are checked in step 5).
+                if self.pairs.waiting(id) > 0 {
+                    self.is_touched[id as usize] = true;
+                    self.touched.push(id);
+                }
                 if p.fat.contains(&tight) {
                     return;
                 }
