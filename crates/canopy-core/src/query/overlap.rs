@@ -104,6 +104,18 @@ impl Bvh {
     }
 
     /// Calls `f` with every primitive whose box contains `point` (boundary included).
+    ///
+    /// ```
+    /// use canopy_core::{Aabb, Bvh, BuildOptions};
+    /// use nalgebra::Point3;
+    /// let boxes = [Aabb::from_arrays([0.0; 3], [2.0; 3]), Aabb::from_arrays([1.0; 3], [3.0; 3])];
+    /// let bvh = Bvh::build(&boxes, BuildOptions::default())?;
+    /// let mut hits = Vec::new();
+    /// bvh.for_each_containing_point(&Point3::new(1.5, 1.5, 1.5), |i| hits.push(i));
+    /// hits.sort();
+    /// assert_eq!(hits, [0, 1]);
+    /// # Ok::<(), canopy_core::BvhError>(())
+    /// ```
     pub fn for_each_containing_point(&self, point: &Point3<f32>, f: impl FnMut(u32)) {
         self.for_each_overlap(&Aabb::from_point(*point), f)
     }

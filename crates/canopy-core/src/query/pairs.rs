@@ -689,6 +689,17 @@ impl Bvh {
 
     /// The pairs of [`Bvh::pairs_with`] as `(self primitive, other primitive)`, found in
     /// parallel; the order depends only on the two trees.
+    ///
+    /// ```
+    /// use canopy_core::{Aabb, Bvh, BuildOptions};
+    /// let a: Vec<Aabb> = (0..50).map(|i| Aabb::from_arrays([i as f32; 3], [i as f32 + 0.5; 3])).collect();
+    /// let b = [Aabb::from_arrays([10.2; 3], [12.2; 3])];
+    /// let (ta, tb) = (Bvh::build(&a, BuildOptions::default())?, Bvh::build(&b, BuildOptions::default())?);
+    /// let mut pairs = ta.par_pairs_with(&tb);
+    /// pairs.sort();
+    /// assert_eq!(pairs, [(10, 0), (11, 0), (12, 0)]);
+    /// # Ok::<(), canopy_core::BvhError>(())
+    /// ```
     pub fn par_pairs_with(&self, other: &Bvh) -> Vec<(u32, u32)> {
         match self.root_task(other) {
             Some(start) => par_walk::<false, All, All>(self, &All, other, &All, start),
@@ -731,6 +742,18 @@ impl Bvh {
     }
 
     /// [`Bvh::self_pairs`] restricted to pairs with at least one marked primitive.
+    ///
+    /// ```
+    /// use canopy_core::{Aabb, Bvh, BuildOptions};
+    /// let boxes: Vec<Aabb> = (0..20).map(|i| Aabb::from_arrays([i as f32; 3], [i as f32 + 1.0; 3])).collect();
+    /// let bvh = Bvh::build(&boxes, BuildOptions::default())?;
+    /// let marks = bvh.marks(|i| i == 0 || i == 10);
+    /// let mut pairs = Vec::new();
+    /// bvh.self_pairs_marked(&marks, |a, b| pairs.push((a, b)));
+    /// pairs.sort();
+    /// assert_eq!(pairs, [(0, 1), (9, 10), (10, 11)]);
+    /// # Ok::<(), canopy_core::BvhError>(())
+    /// ```
     pub fn self_pairs_marked(&self, marks: &PairMarks, mut f: impl FnMut(u32, u32)) {
         if self.nodes.is_empty() {
             return;
@@ -744,6 +767,16 @@ impl Bvh {
 
     /// [`Bvh::par_self_pairs`] restricted to pairs with at least one marked primitive; the
     /// order depends only on the tree and the marks.
+    ///
+    /// ```
+    /// use canopy_core::{Aabb, Bvh, BuildOptions};
+    /// let boxes: Vec<Aabb> = (0..20).map(|i| Aabb::from_arrays([i as f32; 3], [i as f32 + 1.0; 3])).collect();
+    /// let bvh = Bvh::build(&boxes, BuildOptions::default())?;
+    /// let mut pairs = bvh.par_self_pairs_marked(&bvh.marks(|i| i == 19));
+    /// pairs.sort();
+    /// assert_eq!(pairs, [(18, 19)]);
+    /// # Ok::<(), canopy_core::BvhError>(())
+    /// ```
     pub fn par_self_pairs_marked(&self, marks: &PairMarks) -> Vec<(u32, u32)> {
         if self.nodes.is_empty() {
             return Vec::new();
@@ -757,6 +790,19 @@ impl Bvh {
 
     /// [`Bvh::pairs_with`] restricted to pairs where the primitive of `self` is marked in
     /// `marks` or the primitive of `other` is marked in `other_marks`.
+    ///
+    /// ```
+    /// use canopy_core::{Aabb, Bvh, BuildOptions};
+    /// let a: Vec<Aabb> = (0..10).map(|i| Aabb::from_arrays([i as f32; 3], [i as f32 + 0.5; 3])).collect();
+    /// let b: Vec<Aabb> = (0..10).map(|i| Aabb::from_arrays([i as f32 + 0.25; 3], [i as f32 + 0.75; 3])).collect();
+    /// let (ta, tb) = (Bvh::build(&a, BuildOptions::default())?, Bvh::build(&b, BuildOptions::default())?);
+    /// let (ma, mb) = (ta.marks(|i| i == 3), tb.marks(|j| j == 7));
+    /// let mut pairs = Vec::new();
+    /// ta.pairs_with_marked(&ma, &tb, &mb, |i, j| pairs.push((i, j)));
+    /// pairs.sort();
+    /// assert_eq!(pairs, [(3, 3), (7, 7)]);
+    /// # Ok::<(), canopy_core::BvhError>(())
+    /// ```
     pub fn pairs_with_marked(
         &self,
         marks: &PairMarks,
@@ -778,6 +824,15 @@ impl Bvh {
 
     /// [`Bvh::pairs_with_marked`], found in parallel; the order depends only on the trees and
     /// the marks.
+    ///
+    /// ```
+    /// use canopy_core::{Aabb, Bvh, BuildOptions};
+    /// let a: Vec<Aabb> = (0..10).map(|i| Aabb::from_arrays([i as f32; 3], [i as f32 + 0.5; 3])).collect();
+    /// let (ta, tb) = (Bvh::build(&a, BuildOptions::default())?, Bvh::build(&a, BuildOptions::default())?);
+    /// let pairs = ta.par_pairs_with_marked(&ta.marks(|i| i == 4), &tb, &tb.marks(|_| false));
+    /// assert_eq!(pairs, [(4, 4)]);
+    /// # Ok::<(), canopy_core::BvhError>(())
+    /// ```
     pub fn par_pairs_with_marked(
         &self,
         marks: &PairMarks,
