@@ -97,31 +97,42 @@ impl Dest {
     }
 }
 
-fn scatter_parallel(keys: &[u64], vals: &[u32], dk: &mut [u64], dv: &mut [u32], pass: u32) {
-    let n = keys.len();
-    let chunks = (rayon::current_num_threads() * 4).clamp(1, n.div_ceil(4096));
-    let chunk_len = n.div_ceil(chunks);
-    // Per-chunk histograms, then exclusive offsets in (bucket, chunk) order: chunk c writes
-    // bucket b starting after every earlier bucket and after bucket b of chunks before c.
+/// Per-chunk histograms of `dig` over `keys` in chunks of `chunk_len`, turned into exclusive
+/// offsets in (bucket, chunk) order: chunk c writes bucket b starting after every earlier
+/// bucket and after bucket b of the chunks before c. The offsets partition `0..keys.len()`.
+fn chunk_offsets(
+    keys: &[u64],
+    chunk_len: usize,
+    buckets: usize,
+    dig: impl Fn(u64) -> usize + Sync,
+) -> Vec<Vec<usize>> {
     let mut hist: Vec<Vec<usize>> = keys
         .par_chunks(chunk_len)
         .map(|c| {
-            let mut h = vec![0usize; BUCKETS];
+            let mut h = vec![0usize; buckets];
             for &k in c {
-                h[digit(k, pass)] += 1;
+                h[dig(k)] += 1;
             }
             h
         })
         .collect();
     let mut sum = 0;
-    for b in 0..BUCKETS {
+    for b in 0..buckets {
         for h in hist.iter_mut() {
             let c = h[b];
             h[b] = sum;
             sum += c;
         }
     }
-    debug_assert_eq!(sum, n);
+    debug_assert_eq!(sum, keys.len());
+    hist
+}
+
+fn scatter_parallel(keys: &[u64], vals: &[u32], dk: &mut [u64], dv: &mut [u32], pass: u32) {
+    let n = keys.len();
+    let chunks = (rayon::current_num_threads() * 4).clamp(1, n.div_ceil(4096));
+    let chunk_len = n.div_ceil(chunks);
+    let mut hist = chunk_offsets(keys, chunk_len, BUCKETS, |k| digit(k, pass));
     let dest = Dest {
         keys: dk.as_mut_ptr(),
         vals: dv.as_mut_ptr(),
@@ -234,25 +245,7 @@ fn scatter_keys_parallel(
     let n = keys.len();
     let chunks = (rayon::current_num_threads() * 4).clamp(1, n.div_ceil(4096));
     let chunk_len = n.div_ceil(chunks);
-    let mut hist: Vec<Vec<usize>> = keys
-        .par_chunks(chunk_len)
-        .map(|c| {
-            let mut h = vec![0usize; buckets];
-            for &k in c {
-                h[dig(k)] += 1;
-            }
-            h
-        })
-        .collect();
-    let mut sum = 0;
-    for b in 0..buckets {
-        for h in hist.iter_mut() {
-            let c = h[b];
-            h[b] = sum;
-            sum += c;
-        }
-    }
-    debug_assert_eq!(sum, n);
+    let mut hist = chunk_offsets(keys, chunk_len, buckets, &dig);
     let dest = KeyDest(dk.as_mut_ptr());
     keys.par_chunks(chunk_len)
         .zip(hist.par_iter_mut())
