@@ -3,23 +3,16 @@
 //! no live pair involves a removed or disabled collider or is filtered; the event stream
 //! replays to exactly the live pair set; and the events are the same with 1 and 2 threads.
 //!
-//! The truth is brute force over all collider pairs, with Rapier's filter rules re-stated here
-//! from `NarrowPhase::compute_contacts` (independently of `filter.rs`).
+//! The truth is brute force over all collider pairs, with Rapier's filter rules as restated
+//! (independently of `filter.rs`) by the measuring harness's `narrow_phase_filter`.
 
 use canopy_rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig};
+use canopy_scenes::harness::{handle_pair, narrow_phase_filter, HandlePair};
 use proptest::prelude::*;
 use rapier3d::prelude::*;
 use std::collections::HashSet;
 
-type Pair = (ColliderHandle, ColliderHandle);
-
-fn key(a: ColliderHandle, b: ColliderHandle) -> Pair {
-    if a.into_raw_parts() < b.into_raw_parts() {
-        (a, b)
-    } else {
-        (b, a)
-    }
-}
+type Pair = HandlePair;
 
 /// A broadphase wrapper that checks the contract after each update and logs the events.
 struct Checked {
@@ -43,21 +36,6 @@ impl Checked {
             checked_pairs: 0,
         }
     }
-}
-
-fn body_type(c: &Collider, bodies: &RigidBodySet) -> RigidBodyType {
-    c.parent()
-        .map(|h| bodies[h].body_type())
-        .unwrap_or(RigidBodyType::Fixed)
-}
-
-fn narrow_phase_needs(c1: &Collider, c2: &Collider, bodies: &RigidBodySet) -> bool {
-    if c1.parent().is_some() && c1.parent() == c2.parent() {
-        return false;
-    }
-    let (t1, t2) = (body_type(c1, bodies), body_type(c2, bodies));
-    (c1.active_collision_types().test(t1, t2) || c2.active_collision_types().test(t1, t2))
-        && c1.collision_groups().test(c2.collision_groups())
 }
 
 fn valid(a: &rapier3d::parry::bounding_volume::Aabb) -> bool {
@@ -86,14 +64,14 @@ impl BroadPhase for Checked {
         for e in &events[start..] {
             match e {
                 BroadPhasePairEvent::AddPair(p) => {
-                    let k = key(p.collider1, p.collider2);
+                    let k = handle_pair(p.collider1, p.collider2);
                     if !self.replay.insert(k) {
                         self.violations.push(format!("AddPair of live pair {k:?}"));
                     }
                     self.log.push((true, k));
                 }
                 BroadPhasePairEvent::DeletePair(p) => {
-                    let k = key(p.collider1, p.collider2);
+                    let k = handle_pair(p.collider1, p.collider2);
                     if !self.replay.remove(&k) {
                         self.violations
                             .push(format!("DeletePair of dead pair {k:?}"));
@@ -102,7 +80,7 @@ impl BroadPhase for Checked {
                 }
             }
         }
-        let live: HashSet<Pair> = self.inner.pairs().map(|(a, b)| key(a, b)).collect();
+        let live: HashSet<Pair> = self.inner.pairs().map(|(a, b)| handle_pair(a, b)).collect();
         if live != self.replay {
             self.violations.push(format!(
                 "update {}: event replay differs from the live set ({} vs {})",
@@ -131,7 +109,10 @@ impl BroadPhase for Checked {
             .collect();
         for (i, (h1, c1, a1)) in all.iter().enumerate() {
             for (h2, c2, a2) in &all[i + 1..] {
-                if valid(a1) && valid(a2) && a1.intersects(a2) && narrow_phase_needs(c1, c2, bodies)
+                if valid(a1)
+                    && valid(a2)
+                    && a1.intersects(a2)
+                    && narrow_phase_filter(c1, c2, bodies)
                 {
                     self.checked_pairs += 1;
                     if !self.inner.contains_pair(*h1, *h2) {
@@ -149,7 +130,7 @@ impl BroadPhase for Checked {
                     .push(format!("live pair with a removed collider {a:?} {b:?}"));
                 continue;
             };
-            if !c1.is_enabled() || !c2.is_enabled() || !narrow_phase_needs(c1, c2, bodies) {
+            if !c1.is_enabled() || !c2.is_enabled() || !narrow_phase_filter(c1, c2, bodies) {
                 self.violations.push(format!(
                     "live pair that the narrow phase discards {a:?} {b:?}"
                 ));
