@@ -397,13 +397,24 @@ impl CanopyBroadPhase {
         }
     }
 
-    fn push_delete(&self, a: u32, b: u32, events: &mut Vec<BroadPhasePairEvent>) {
+    /// The collider pair of proxies `a` and `b`, smaller id first.
+    fn collider_pair(&self, a: u32, b: u32) -> Option<ColliderPair> {
         let (a, b) = if a < b { (a, b) } else { (b, a) };
-        let (pa, pb) = (&self.proxies[a as usize], &self.proxies[b as usize]);
-        if let (Some(pa), Some(pb)) = (pa, pb) {
-            events.push(BroadPhasePairEvent::DeletePair(ColliderPair::new(
-                pa.handle, pb.handle,
-            )));
+        match (&self.proxies[a as usize], &self.proxies[b as usize]) {
+            (Some(pa), Some(pb)) => Some(ColliderPair::new(pa.handle, pb.handle)),
+            _ => None,
+        }
+    }
+
+    fn push_delete(&self, a: u32, b: u32, events: &mut Vec<BroadPhasePairEvent>) {
+        if let Some(pair) = self.collider_pair(a, b) {
+            events.push(BroadPhasePairEvent::DeletePair(pair));
+        }
+    }
+
+    fn push_add(&self, a: u32, b: u32, events: &mut Vec<BroadPhasePairEvent>) {
+        if let Some(pair) = self.collider_pair(a, b) {
+            events.push(BroadPhasePairEvent::AddPair(pair));
         }
     }
 
@@ -753,20 +764,12 @@ impl BroadPhase for CanopyBroadPhase {
         }
 
         // 5. New candidates, live at once when their exact boxes overlap.
-        let mut added = 0;
         for (a, b) in self.find_new_pairs(&moved) {
-            if !self.pairs.insert(a, b) {
-                continue;
-            }
-            let (x, y) = if a < b { (a, b) } else { (b, a) };
-            if let (Some(px), Some(py)) = (&self.proxies[x as usize], &self.proxies[y as usize]) {
-                if self.tights[x as usize].intersects(&self.tights[y as usize]) {
-                    self.pairs.set_live(x, y, true);
-                    events.push(BroadPhasePairEvent::AddPair(ColliderPair::new(
-                        px.handle, py.handle,
-                    )));
-                    added += 1;
-                }
+            if self.pairs.insert(a, b)
+                && self.tights[a as usize].intersects(&self.tights[b as usize])
+            {
+                self.pairs.set_live(a, b, true);
+                self.push_add(a, b, events);
             }
         }
 
@@ -794,16 +797,13 @@ impl BroadPhase for CanopyBroadPhase {
         }
         for (a, b) in flips {
             if !self.pairs.set_live(a, b, true) {
-                let (x, y) = if a < b { (a, b) } else { (b, a) };
-                if let (Some(px), Some(py)) = (&self.proxies[x as usize], &self.proxies[y as usize])
-                {
-                    events.push(BroadPhasePairEvent::AddPair(ColliderPair::new(
-                        px.handle, py.handle,
-                    )));
-                    added += 1;
-                }
+                self.push_add(a, b, events);
             }
         }
+        let added = events[events_before..]
+            .iter()
+            .filter(|e| matches!(e, BroadPhasePairEvent::AddPair(_)))
+            .count();
         let deleted = events.len() - events_before - added;
         self.touched = touched;
         self.touched.clear();
