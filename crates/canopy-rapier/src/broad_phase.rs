@@ -179,10 +179,11 @@ impl CanopyBroadPhase {
     }
 
     fn mark_moved(&mut self, id: u32) {
-        let p = self.proxies[id as usize].as_mut().expect("live proxy");
-        if !p.moved {
-            p.moved = true;
-            self.moved.push(id);
+        if let Some(p) = self.proxies[id as usize].as_mut() {
+            if !p.moved {
+                p.moved = true;
+                self.moved.push(id);
+            }
         }
     }
 
@@ -285,10 +286,7 @@ impl CanopyBroadPhase {
                 if fat.is_valid() {
                     p.fat = fat;
                     self.trees[p.mobility as usize].set_box(p);
-                    if !p.moved {
-                        p.moved = true;
-                        self.moved.push(id);
-                    }
+                    self.mark_moved(id);
                     return;
                 }
             }
