@@ -499,12 +499,8 @@ impl CanopyBroadPhase {
                 let Some(pb) = &self.proxies[b as usize] else {
                     continue;
                 };
-                if pa.fat.intersects(&pb.fat)
-                    && pa.filter.may_pair(&pb.filter)
-                    && (pa.mobility != Mobility::Fixed
-                        || pb.mobility != Mobility::Fixed
-                        || self.fixed_fixed > 0)
-                {
+                // `may_pair` also rules out fixed-fixed pairs unless a collider enables them.
+                if pa.fat.intersects(&pb.fat) && pa.filter.may_pair(&pb.filter) {
                     out.push((a, b));
                 }
             }
