@@ -13,17 +13,12 @@
 
 mod common;
 
-use std::time::Duration;
-
 use canopy::core::{Aabb, BuildOptions, Builder, Bvh};
 use common::{
-    in_one_thread, one_thread_pool, parry_sah_cost, parry_shape, random_boxes, size_label,
-    to_parry, SIZES,
+    configure_group, in_one_thread, one_thread_pool, parry_sah_cost, parry_shape, random_boxes,
+    size_label, to_parry, SIZES,
 };
-use criterion::measurement::WallTime;
-use criterion::{
-    black_box, criterion_group, criterion_main, BenchmarkGroup, Criterion, SamplingMode, Throughput,
-};
+use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use parry3d::partitioning::{Bvh as ParryBvh, BvhBuildStrategy};
 
 /// Seed of the box sets (the same boxes as in `core_queries`).
@@ -107,22 +102,6 @@ fn quality_table() {
     println!();
 }
 
-/// Sample settings per size, so that the whole bench runs in a few minutes on two cores.
-fn configure(group: &mut BenchmarkGroup<'_, WallTime>, n: usize) {
-    group.throughput(Throughput::Elements(n as u64));
-    if n >= 1_000_000 {
-        group
-            .sampling_mode(SamplingMode::Flat)
-            .sample_size(10)
-            .warm_up_time(Duration::from_secs(1))
-            .measurement_time(Duration::from_secs(5));
-    } else if n >= 100_000 {
-        group.sampling_mode(SamplingMode::Flat).sample_size(15);
-    } else {
-        group.sample_size(30);
-    }
-}
-
 fn bench_build(c: &mut Criterion) {
     quality_table();
     let pool = one_thread_pool();
@@ -130,7 +109,8 @@ fn bench_build(c: &mut Criterion) {
         let boxes = random_boxes(n, SEED);
         let pboxes = to_parry(&boxes);
         let mut g = c.benchmark_group(format!("build/{n}"));
-        configure(&mut g, n);
+        g.throughput(Throughput::Elements(n as u64));
+        configure_group(&mut g, n);
 
         g.bench_function("parry_binned", |b| {
             b.iter(|| ParryBvh::from_leaves(BvhBuildStrategy::Binned, black_box(&pboxes)))

@@ -15,17 +15,12 @@
 
 mod common;
 
-use std::time::Duration;
-
 use canopy::core::{Aabb, BuildOptions, Bvh, Ray};
 use common::{
-    diagonal, in_one_thread, one_thread_pool, random_boxes, random_rays, rays_to_parry, size_label,
-    to_parry, SIZES,
+    configure_group, diagonal, in_one_thread, one_thread_pool, random_boxes, random_rays,
+    rays_to_parry, size_label, to_parry, SIZES,
 };
-use criterion::measurement::WallTime;
-use criterion::{
-    black_box, criterion_group, criterion_main, BenchmarkGroup, Criterion, SamplingMode, Throughput,
-};
+use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use parry3d::partitioning::{Bvh as ParryBvh, BvhBuildStrategy, BvhWorkspace};
 use parry3d::query::RayCast;
 
@@ -169,21 +164,6 @@ impl Scene {
     }
 }
 
-/// Sample settings per size, so that the whole bench runs in a few minutes on two cores.
-fn configure(group: &mut BenchmarkGroup<'_, WallTime>, n: usize) {
-    if n >= 1_000_000 {
-        group
-            .sampling_mode(SamplingMode::Flat)
-            .sample_size(10)
-            .warm_up_time(Duration::from_secs(1))
-            .measurement_time(Duration::from_secs(5));
-    } else if n >= 100_000 {
-        group.sampling_mode(SamplingMode::Flat).sample_size(15);
-    } else {
-        group.sample_size(30);
-    }
-}
-
 fn bench_queries(c: &mut Criterion) {
     let pool = one_thread_pool();
     for n in SIZES {
@@ -191,7 +171,7 @@ fn bench_queries(c: &mut Criterion) {
         scene.check();
 
         let mut g = c.benchmark_group(format!("self_pairs/{n}"));
-        configure(&mut g, n);
+        configure_group(&mut g, n);
         let mut ws = BvhWorkspace::default();
         g.bench_function("parry", |b| {
             b.iter(|| black_box(&scene).parry_pair_count(&mut ws))
@@ -205,7 +185,7 @@ fn bench_queries(c: &mut Criterion) {
         g.finish();
 
         let mut g = c.benchmark_group(format!("rays/{n}"));
-        configure(&mut g, n);
+        configure_group(&mut g, n);
         g.throughput(Throughput::Elements(RAYS as u64));
         g.bench_function("parry", |b| {
             b.iter(|| {

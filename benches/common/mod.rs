@@ -210,3 +210,23 @@ pub fn one_thread_pool() -> rayon::ThreadPool {
 pub fn in_one_thread<R: Send>(f: impl FnOnce() -> R + Send) -> R {
     one_thread_pool().install(f)
 }
+
+/// Sample settings per size, so that the whole bench runs in a few minutes on two cores.
+pub fn configure_group(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    n: usize,
+) {
+    use criterion::SamplingMode;
+    use std::time::Duration;
+    if n >= 1_000_000 {
+        group
+            .sampling_mode(SamplingMode::Flat)
+            .sample_size(10)
+            .warm_up_time(Duration::from_secs(1))
+            .measurement_time(Duration::from_secs(5));
+    } else if n >= 100_000 {
+        group.sampling_mode(SamplingMode::Flat).sample_size(15);
+    } else {
+        group.sample_size(30);
+    }
+}
