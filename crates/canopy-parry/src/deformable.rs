@@ -6,7 +6,7 @@ use nalgebra::Point3;
 
 use crate::error::CollisionError;
 use crate::parts::{build_part_tree, mesh_local_aabb, mesh_triangle_aabbs, Parts};
-use crate::validate::check_mesh_buffers;
+use crate::validate::{check_mesh_buffers, in_range_point};
 use parry3d::bounding_volume::Aabb as ParryAabb;
 
 /// The state of one deformable mesh of the world.
@@ -39,7 +39,7 @@ impl DeformableMesh {
         })
     }
 
-    /// Replaces the vertices (same count, all finite).
+    /// Replaces the vertices (same count, all finite and within ±[`MAX_COORDINATE`](crate::MAX_COORDINATE)).
     pub fn set_vertices(&mut self, vertices: &[Point3<f32>]) -> Result<(), CollisionError> {
         if vertices.len() != self.vertices.len() {
             return Err(CollisionError::VertexCountMismatch {
@@ -47,12 +47,9 @@ impl DeformableMesh {
                 got: vertices.len(),
             });
         }
-        if !vertices
-            .iter()
-            .all(|p| p.coords.iter().all(|c| c.is_finite()))
-        {
+        if !vertices.iter().all(in_range_point) {
             return Err(CollisionError::DegenerateShape(
-                "mesh vertex with a NaN or infinite coordinate".into(),
+                "mesh vertex with a NaN, infinite or out-of-range coordinate".into(),
             ));
         }
         self.vertices.copy_from_slice(vertices);
@@ -70,7 +67,7 @@ impl DeformableMesh {
     pub fn apply_boxes(&mut self, boxes: &[Aabb], margin: f32) -> Result<(), CollisionError> {
         self.tree
             .refit(boxes)
-            .map_err(|_| CollisionError::NonFiniteBounds)?;
+            .map_err(|_| CollisionError::OutOfRange)?;
         self.margin = margin;
         self.local_aabb = mesh_local_aabb(&self.vertices, &self.indices);
         self.dirty = false;

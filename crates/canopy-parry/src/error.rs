@@ -21,10 +21,14 @@ pub enum CollisionError {
     /// custom shapes, composite parts of a compound).
     #[error("unsupported shape type: {0}")]
     UnsupportedShape(String),
-    /// The shape placed at the given pose has a non-finite bounding box (it is too far away or
-    /// too large for `f32`).
-    #[error("the object's bounding box is not finite")]
-    NonFiniteBounds,
+    /// The shape placed at the given pose has a bounding box that is not finite or reaches
+    /// beyond ±[`MAX_COORDINATE`](crate::MAX_COORDINATE) (too far away or too large for `f32`
+    /// geometry).
+    #[error(
+        "the object's bounding box is not finite or reaches beyond ±{}",
+        crate::MAX_COORDINATE
+    )]
+    OutOfRange,
     /// The prediction distance given to `update` is negative, NaN or infinite.
     #[error("invalid prediction distance {0}: it must be finite and >= 0")]
     InvalidPrediction(f32),

@@ -60,7 +60,7 @@ pub use narrow::in_contact;
 pub use pair::{min_distance, ContactPair, Manifold, WorldContact};
 pub use self_contact::{adjacent, triangle_pair_manifold, SelfContact};
 pub use stats::UpdateStats;
-pub use validate::{check_pose, check_shape};
+pub use validate::{check_bounds, check_pose, check_shape, MAX_COORDINATE};
 pub use world::CollisionWorld;
 
 pub use parry3d;

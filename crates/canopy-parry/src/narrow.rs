@@ -5,7 +5,7 @@
 //! routines do, with manifolds kept per part pair across updates.
 
 use canopy_core::{BuildOptions, Builder, Bvh};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Unit, Vector3};
 use parry3d::bounding_volume::BoundingVolume;
 use parry3d::query::{DefaultQueryDispatcher, PersistentQueryDispatcher};
 use parry3d::shape::Shape;
@@ -45,16 +45,26 @@ pub(crate) fn update_pair(
     let pos12 = pose1.inv_mul(pose2);
     match (g1, g2) {
         (Geometry::Convex(s1), Geometry::Convex(s2)) => {
-            let result = DefaultQueryDispatcher.contact_manifolds(
-                &pos12,
-                s1,
-                s2,
-                prediction,
-                &mut pair.manifolds,
-                &mut pair.workspace,
-            );
-            if result.is_err() {
+            let warm = warm_started(&pair.manifolds);
+            let compute = |pair: &mut ContactPair| {
+                let result = DefaultQueryDispatcher.contact_manifolds(
+                    &pos12,
+                    s1,
+                    s2,
+                    prediction,
+                    &mut pair.manifolds,
+                    &mut pair.workspace,
+                );
+                if result.is_err() {
+                    pair.manifolds.clear();
+                }
+            };
+            compute(pair);
+            if warm && !confirmed_empty(&pair.manifolds, &pos12, s1, s2, prediction) {
+                // A failed warm start: recompute cold (see `convex_convex`).
                 pair.manifolds.clear();
+                pair.workspace = None;
+                compute(pair);
             }
         }
         (Geometry::Composite { parts, tree }, Geometry::Convex(s2)) => {
@@ -83,6 +93,67 @@ pub(crate) fn update_pair(
         }
     }
     pair.touching = in_contact(&pair.manifolds, prediction);
+}
+
+/// `true` when some kept manifold has a normal for parry's GJK to start from.
+fn warm_started(manifolds: &[Manifold]) -> bool {
+    manifolds.iter().any(|m| m.local_n1 != Vector3::zeros())
+}
+
+/// `true` unless a "no contact" answer is suspect: when every manifold is empty, one of their
+/// normals must separate `s1` from `s2` (at `pos12`, in `s1`'s frame) by more than
+/// `prediction`, checked with one support point of each shape. A shape without a support map
+/// is taken on trust.
+fn confirmed_empty(
+    manifolds: &[Manifold],
+    pos12: &Isometry3<f32>,
+    s1: &dyn Shape,
+    s2: &dyn Shape,
+    prediction: f32,
+) -> bool {
+    if manifolds.iter().any(|m| !m.points.is_empty()) {
+        return true;
+    }
+    let (Some(m1), Some(m2)) = (s1.as_support_map(), s2.as_support_map()) else {
+        return true;
+    };
+    manifolds.iter().any(|m| {
+        let Some(n) = Unit::try_new(m.local_n1, 1.0e-6) else {
+            return false;
+        };
+        let reach1 = m1.local_support_point_toward(&n).coords.dot(&n);
+        let reach2 = m2.support_point_toward(pos12, &-n).coords.dot(&n);
+        reach2 - reach1 > prediction
+    })
+}
+
+/// Runs parry's convex-convex manifold code (`compute`) on the kept manifold of `s1` and `s2`
+/// (at `pos12`, in `s1`'s frame); an unsupported pair leaves it empty. parry's GJK/EPA
+/// warm-starts from the kept normal and occasionally fails from there, returning no contact
+/// for touching shapes (seen: a convex part 0.24 deep in a capsule; a cone 0.07 deep in a
+/// round cuboid it was 0.19 away from the update before; parry's own persistent routines lose
+/// them the same way), which would be a false negative. So an empty answer after a warm start
+/// is checked ([`confirmed_empty`]: two support points) and, if its normal does not separate
+/// the shapes, recomputed cold, from no normal, as a fresh call would.
+fn convex_convex(
+    manifold: &mut Manifold,
+    pos12: &Isometry3<f32>,
+    s1: &dyn Shape,
+    s2: &dyn Shape,
+    prediction: f32,
+    compute: impl Fn(&mut Manifold) -> Result<(), parry3d::query::Unsupported>,
+) {
+    let warm = warm_started(std::slice::from_ref(manifold));
+    if compute(manifold).is_err() {
+        manifold.points.clear();
+    }
+    if warm && !confirmed_empty(std::slice::from_ref(manifold), pos12, s1, s2, prediction) {
+        manifold.local_n1 = Vector3::zeros();
+        manifold.local_n2 = Vector3::zeros();
+        if compute(manifold).is_err() {
+            manifold.points.clear();
+        }
+    }
 }
 
 /// `true` when some manifold point is at most `prediction` apart. parry's polygon clipping can
@@ -162,25 +233,26 @@ fn composite_convex(
     let inv = if flipped { Some(pos.inverse()) } else { None };
     for (key, manifold) in pair.keys.iter().zip(pair.manifolds.iter_mut()) {
         parts.with_part(part_of(*key), &mut |part_pos, part, normals| {
-            let result = if let Some(pos_convex_part) = &inv {
+            if let Some(pos_convex_part) = &inv {
                 let pos12 = match part_pos {
                     Some(p) => pos_convex_part * p,
                     None => *pos_convex_part,
                 };
-                DefaultQueryDispatcher.contact_manifold_convex_convex(
-                    &pos12, convex, part, None, normals, prediction, manifold,
-                )
+                convex_convex(manifold, &pos12, convex, part, prediction, |m| {
+                    DefaultQueryDispatcher.contact_manifold_convex_convex(
+                        &pos12, convex, part, None, normals, prediction, m,
+                    )
+                });
             } else {
                 let pos12 = match part_pos {
                     Some(p) => p.inv_mul(pos),
                     None => *pos,
                 };
-                DefaultQueryDispatcher.contact_manifold_convex_convex(
-                    &pos12, part, convex, normals, None, prediction, manifold,
-                )
-            };
-            if result.is_err() {
-                manifold.points.clear();
+                convex_convex(manifold, &pos12, part, convex, prediction, |m| {
+                    DefaultQueryDispatcher.contact_manifold_convex_convex(
+                        &pos12, part, convex, normals, None, prediction, m,
+                    )
+                });
             }
         });
     }
@@ -284,12 +356,11 @@ fn composite_composite(
                     }
                     .inverse()
                 };
-                let result = DefaultQueryDispatcher.contact_manifold_convex_convex(
-                    &pos, part1, part2, normals1, normals2, prediction, manifold,
-                );
-                if result.is_err() {
-                    manifold.points.clear();
-                }
+                convex_convex(manifold, &pos, part1, part2, prediction, |m| {
+                    DefaultQueryDispatcher.contact_manifold_convex_convex(
+                        &pos, part1, part2, normals1, normals2, prediction, m,
+                    )
+                });
             });
         });
     }

@@ -2,10 +2,27 @@
 //! type) and deformable-mesh buffers. Everything the world accepts has passed through here, so
 //! parry and canopy-core never see NaN or a broken index.
 
+use canopy_core::Aabb;
 use nalgebra::{Isometry3, Point3, Vector3};
 use parry3d::shape::{Shape, TypedShape};
 
 use crate::error::CollisionError;
+
+/// Largest coordinate magnitude of an object's world-space bounding box (prediction margin
+/// included). Beyond it `f32` spacing exceeds 8 units, and parry's GJK/EPA, which multiplies up
+/// to four lengths together (squared norms of cross products), overflows to infinity and
+/// panics; such objects are refused with [`CollisionError::OutOfRange`] instead.
+pub const MAX_COORDINATE: f32 = 1.0e8;
+
+/// Checks that a world-space box is valid and within ±[`MAX_COORDINATE`].
+pub fn check_bounds(aabb: &Aabb) -> Result<(), CollisionError> {
+    let inside = |c: f32| c.abs() <= MAX_COORDINATE;
+    if aabb.is_valid() && aabb.min.iter().chain(aabb.max.iter()).all(|&c| inside(c)) {
+        Ok(())
+    } else {
+        Err(CollisionError::OutOfRange)
+    }
+}
 
 /// Largest accepted deviation of a rotation quaternion's norm from 1.
 const UNIT_TOLERANCE: f32 = 1.0e-4;
@@ -29,6 +46,11 @@ fn finite_point(p: &Point3<f32>) -> bool {
     p.coords.iter().all(|c| c.is_finite())
 }
 
+/// `true` when every coordinate of `p` is finite and within ±[`MAX_COORDINATE`].
+pub fn in_range_point(p: &Point3<f32>) -> bool {
+    p.coords.iter().all(|c| c.abs() <= MAX_COORDINATE)
+}
+
 fn positive(x: f32) -> bool {
     x.is_finite() && x > 0.0
 }
@@ -46,7 +68,7 @@ fn border(radius: f32) -> Result<(), CollisionError> {
 }
 
 /// Checks the vertex and index buffers of a triangle mesh: at least one triangle, finite
-/// vertices, indices in range, a triangle count that fits `u32`.
+/// vertices within ±[`MAX_COORDINATE`], indices in range, a triangle count that fits `u32`.
 pub fn check_mesh_buffers(
     vertices: &[Point3<f32>],
     indices: &[[u32; 3]],
@@ -57,8 +79,10 @@ pub fn check_mesh_buffers(
     if indices.len() >= u32::MAX as usize || vertices.len() >= u32::MAX as usize {
         return Err(CollisionError::TooMany);
     }
-    if !vertices.iter().all(finite_point) {
-        return Err(degenerate("mesh vertex with a NaN or infinite coordinate"));
+    if !vertices.iter().all(in_range_point) {
+        return Err(degenerate(
+            "mesh vertex with a NaN, infinite or out-of-range coordinate",
+        ));
     }
     let n = vertices.len();
     if indices.iter().flatten().any(|&i| i as usize >= n) {

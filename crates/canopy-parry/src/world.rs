@@ -21,7 +21,7 @@ use crate::pair::ContactPair;
 use crate::parts::{build_part_tree, composite_part_aabbs, Parts};
 use crate::self_contact::{self_contacts, SelfContact};
 use crate::stats::UpdateStats;
-use crate::validate::{check_pose, check_shape};
+use crate::validate::{check_bounds, check_pose, check_shape};
 
 const NONE: u32 = u32::MAX;
 
@@ -199,7 +199,7 @@ impl<T> CollisionWorld<T> {
     /// # Errors
     /// [`CollisionError::InvalidPose`], [`CollisionError::DegenerateShape`] (NaN, zero or
     /// negative sizes, broken mesh indices), [`CollisionError::UnsupportedShape`],
-    /// [`CollisionError::NonFiniteBounds`], [`CollisionError::TooMany`].
+    /// [`CollisionError::OutOfRange`], [`CollisionError::TooMany`].
     pub fn insert(
         &mut self,
         shape: SharedShape,
@@ -269,10 +269,11 @@ impl<T> CollisionWorld<T> {
             aabb: Aabb::new(Point3::origin(), Point3::origin()),
             dirty: true,
         };
+        // The shape in its own frame is bounded too: a far-away shape brought back by its pose
+        // would still overflow parry's local-frame arithmetic.
+        check_bounds(&object.world_aabb(&Isometry3::identity(), 0.0))?;
         let aabb = object.world_aabb(&pose, self.prediction.unwrap_or(0.0));
-        if !aabb.is_valid() {
-            return Err(CollisionError::NonFiniteBounds);
-        }
+        check_bounds(&aabb)?;
         object.aabb = aabb;
         let index = match self.free.pop() {
             Some(index) => index,
@@ -341,7 +342,7 @@ impl<T> CollisionWorld<T> {
     ///
     /// # Errors
     /// [`CollisionError::StaleHandle`], [`CollisionError::InvalidPose`],
-    /// [`CollisionError::NonFiniteBounds`].
+    /// [`CollisionError::OutOfRange`].
     pub fn set_pose(
         &mut self,
         handle: ObjectHandle,
@@ -350,9 +351,7 @@ impl<T> CollisionWorld<T> {
         check_pose(&pose)?;
         let margin = self.prediction.unwrap_or(0.0);
         let object = self.object_mut(handle)?;
-        if !object.world_aabb(&pose, margin).is_valid() {
-            return Err(CollisionError::NonFiniteBounds);
-        }
+        check_bounds(&object.world_aabb(&pose, margin))?;
         object.pose = pose;
         object.dirty = true;
         Ok(())
@@ -491,7 +490,7 @@ impl<T> CollisionWorld<T> {
     ///
     /// # Errors
     /// [`CollisionError::InvalidPrediction`] for a negative, NaN or infinite `prediction`;
-    /// [`CollisionError::NonFiniteBounds`] when some box grown by `prediction` overflows. On
+    /// [`CollisionError::OutOfRange`] when some box grown by `prediction` overflows. On
     /// error nothing changed.
     pub fn update(&mut self, prediction: f32) -> Result<(), CollisionError> {
         if !(prediction.is_finite() && prediction >= 0.0) {
@@ -538,7 +537,7 @@ impl<T> CollisionWorld<T> {
                         None => mesh.tree.root_aabb().unwrap_or(object.aabb),
                     };
                     if !root.is_valid() {
-                        return Err(CollisionError::NonFiniteBounds);
+                        return Err(CollisionError::OutOfRange);
                     }
                     (
                         to_canopy(&to_parry(&root).transform_by(&object.pose)),
@@ -547,9 +546,7 @@ impl<T> CollisionWorld<T> {
                 }
                 _ => (object.world_aabb(&object.pose, prediction), None),
             };
-            if !aabb.is_valid() {
-                return Err(CollisionError::NonFiniteBounds);
-            }
+            check_bounds(&aabb)?;
             changes.push((i as u32, aabb, boxes));
         }
         Ok(changes)
@@ -589,12 +586,12 @@ impl<T> CollisionWorld<T> {
                 }
             }
             self.bvh = Bvh::build(&boxes, BuildOptions::default().with_builder(Builder::Lbvh))
-                .map_err(|_| CollisionError::NonFiniteBounds)?;
+                .map_err(|_| CollisionError::OutOfRange)?;
             self.rebuild = false;
         } else {
             self.bvh
                 .refit_primitives(&refits)
-                .map_err(|_| CollisionError::NonFiniteBounds)?;
+                .map_err(|_| CollisionError::OutOfRange)?;
         }
         let prim_slots = &self.prim_slots;
         let mut candidates: Vec<(u32, u32)> = self

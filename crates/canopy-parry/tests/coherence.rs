@@ -2,9 +2,18 @@
 //! contact points instead of recomputing them when the relative motion since the last call is
 //! under about 1° and 1e-3 (`ContactManifold::try_update_contacts`), so the depths of a world
 //! that keeps manifolds (as parry intends) drift from a fresh parry call by up to that motion
-//! times the shape size. Checked here, through many small and larger motions: the same pairs
-//! have contact points (except pairs within `TOL` of the prediction boundary, where a kept
-//! point may legitimately survive or not), and their deepest distances agree within `TOL`.
+//! times the shape size; a world whose manifolds went stale would be off by the jitter itself
+//! (up to 0.05 per step, accumulating). Deep penetrations (beyond
+//! `SHALLOW`) are checked one-sidedly: there a kept normal may stay on a face that is no longer
+//! the minimum-penetration face after the shapes turned (a random world makes 0.8-deep overlaps
+//! of round cuboids), and the depth along it is larger than the fresh EPA minimum, never
+//! smaller: the world's distance may not exceed the truth's by more than `TOL`. Checked here,
+//! through many small and larger motions: every pair the truth has within `prediction - TOL`
+//! has contacts in the world, every world pair has a fresh distance within `prediction +
+//! TOL`, and their deepest distances agree within `TOL` (`TOL = 2.2 · sin 1° ≈ 0.04`: the
+//! kept normal may be 1° off the fresh one, and a point at lever arm `L` from the contact
+//! then reads a distance off by `L · sin 1°`; the largest lever arm of these shapes is about
+//! 2.2, a compound's parts reaching ±0.7 plus 0.42 of part size, or a mesh grid 2.1 wide).
 
 mod common;
 
@@ -14,7 +23,9 @@ use canopy_parry::{CollisionWorld, ObjectHandle};
 use common::*;
 use proptest::prelude::*;
 
-const TOL: f32 = 1.0e-2;
+const TOL: f32 = 0.04;
+/// Deepest penetration checked two-sidedly (physical contacts are far shallower).
+const SHALLOW: f32 = 0.1;
 
 fn deepest(summary: &Summary) -> BTreeMap<(usize, usize), f32> {
     summary
@@ -46,25 +57,39 @@ fn run(seed: u64, n: usize, steps: usize, prediction: f32) {
         }
         world.update(prediction).unwrap();
         let (handles, objects) = truth_objects(&world);
-        let truth = deepest(&truth_summary(&objects, prediction));
+        // The truth is taken with a wider prediction, so that a pair the world keeps just
+        // inside the boundary can be compared with its fresh distance just outside it.
+        let truth = deepest(&truth_summary(&objects, prediction + 2.0 * TOL));
         let mine = deepest(&world_summary(&world, &handles, prediction));
-        let near_boundary = |d: f32| (d - prediction).abs() <= TOL;
         for (k, d) in &truth {
             match mine.get(k) {
-                Some(w) => assert!(
+                Some(w) if *d >= -SHALLOW => assert!(
                     (w - d).abs() <= TOL,
                     "seed {seed} step {step} pair {k:?}: {w} vs truth {d}"
                 ),
+                Some(w) => assert!(
+                    *w <= d + TOL,
+                    "seed {seed} step {step} pair {k:?}: {w} shallower than truth {d}"
+                ),
                 None => assert!(
-                    near_boundary(*d),
+                    *d > prediction - TOL,
                     "seed {seed} step {step}: missing {k:?} ({d})"
                 ),
             }
         }
         for (k, w) in &mine {
+            if truth.contains_key(k) {
+                continue;
+            }
+            // parry's contact query itself sometimes misses a touching pair (GJK gives up;
+            // seen: a cone 1.5e-4 from a convex polyhedron, `contact` returning `None` even
+            // with a prediction of 1.0), while a kept manifold still has the right distance.
+            // Such a pair is checked against parry's distance query instead.
+            let ((p1, s1), (p2, s2)) = (&objects[k.0], &objects[k.1]);
+            let distance = parry3d::query::distance(p1, &**s1, p2, &**s2).unwrap();
             assert!(
-                truth.contains_key(k) || near_boundary(*w),
-                "seed {seed} step {step}: extra pair {k:?} ({w})"
+                distance <= prediction + TOL,
+                "seed {seed} step {step}: extra pair {k:?} ({w}), fresh distance {distance}"
             );
         }
     }

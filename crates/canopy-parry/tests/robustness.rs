@@ -2,7 +2,7 @@
 //! mesh buffers, stale handles and bad update parameters are all refused with an error, and the
 //! world stays usable (and unchanged) afterwards.
 
-use canopy_parry::{CollisionError, CollisionWorld};
+use canopy_parry::{CollisionError, CollisionWorld, MAX_COORDINATE};
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use parry3d::shape::{HalfSpace, SharedShape};
 use proptest::prelude::*;
@@ -48,10 +48,51 @@ fn invalid_poses_are_refused() {
     let huge = SharedShape::ball(3.0e38);
     assert_eq!(
         world.insert(huge, pose(3.0e38), ()),
-        Err(CollisionError::NonFiniteBounds)
+        Err(CollisionError::OutOfRange)
     );
     assert_eq!(world.len(), 1);
     world.update(0.0).unwrap();
+    // Finite but beyond MAX_COORDINATE, in world space or in the shape's own frame: parry's
+    // arithmetic would overflow, so these are refused too; just inside is fine.
+    let far = MAX_COORDINATE * 2.0;
+    assert_eq!(
+        world.insert(ball.clone(), pose(far), ()),
+        Err(CollisionError::OutOfRange)
+    );
+    let far_triangle = SharedShape::triangle(
+        Point3::new(far, 0.0, 0.0),
+        Point3::new(far, 1.0, 0.0),
+        Point3::new(far, 0.0, 1.0),
+    );
+    assert_eq!(
+        world.insert(far_triangle, pose(-far), ()),
+        Err(CollisionError::OutOfRange)
+    );
+    assert_eq!(
+        world.set_pose(h, pose(far)),
+        Err(CollisionError::OutOfRange)
+    );
+    let near_limit = MAX_COORDINATE * 0.5;
+    world.set_pose(h, pose(near_limit)).unwrap();
+    let h2 = world
+        .insert(ball.clone(), pose(near_limit + 0.5), ())
+        .unwrap();
+    world.update(0.0).unwrap();
+    assert_eq!(world.contact_pairs().count(), 1);
+    world.remove(h2).unwrap();
+    assert!(matches!(
+        world.insert_deformable(
+            vec![
+                Point3::new(far, 0.0, 0.0),
+                Point3::origin(),
+                Point3::new(0.0, 1.0, 0.0)
+            ],
+            vec![[0, 1, 2]],
+            pose(0.0),
+            ()
+        ),
+        Err(CollisionError::DegenerateShape(_))
+    ));
 }
 
 #[test]
@@ -175,6 +216,7 @@ fn wild() -> impl Strategy<Value = f32> {
         1 => Just(f32::MAX),
         1 => Just(f32::MIN_POSITIVE),
         1 => Just(1.0e30f32),
+        1 => prop_oneof![Just(1.0e7f32), Just(-9.9e7f32), Just(1.0e8f32), Just(1.5e8f32)],
         1 => any::<f32>(),
     ]
 }
