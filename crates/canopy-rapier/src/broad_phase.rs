@@ -27,6 +27,7 @@ use crate::filter::{FilterData, Mobility};
 use crate::pair_set::PairSet;
 use crate::proxy::{Loc, Proxy};
 use crate::proxy_tree::{ProxyTree, DEAD};
+use crate::queries::{QueryMirror, QueryOverlay};
 use crate::stats::BroadPhaseStats;
 use canopy_core::{Aabb, PairMarks};
 use rapier3d::prelude::*;
@@ -70,8 +71,8 @@ const SPARSE_MOVES: usize = 8;
 pub struct CanopyBroadPhase {
     config: CanopyBroadPhaseConfig,
     /// Indexed by the collider handle's index.
-    proxies: Vec<Option<Proxy>>,
-    trees: [ProxyTree; 3],
+    pub(crate) proxies: Vec<Option<Proxy>>,
+    pub(crate) trees: [ProxyTree; 3],
     pairs: PairSet,
     moved: Vec<u32>,
     stats: BroadPhaseStats,
@@ -87,6 +88,10 @@ pub struct CanopyBroadPhase {
     /// Reused buffers: a bitmap of the modified handles' indices (all zero between updates)
     /// and their generations.
     scratch_order: (Vec<u64>, Vec<u32>),
+    /// Edits made outside a step, for the scene queries (`queries/overlay.rs`).
+    pub(crate) overlay: QueryOverlay,
+    /// The parry BVH behind `as_query_pipeline` (`queries/pipeline.rs`).
+    pub(crate) mirror: QueryMirror,
 }
 
 impl CanopyBroadPhase {
@@ -163,6 +168,7 @@ impl CanopyBroadPhase {
         if !p.is_valid() {
             self.stats.invalid -= 1;
         }
+        self.mirror.touch(id);
         self.take_out_of_tree(&mut p);
         if p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED) {
             self.fixed_fixed -= 1;
@@ -179,6 +185,7 @@ impl CanopyBroadPhase {
     }
 
     fn mark_moved(&mut self, id: u32) {
+        self.mirror.touch(id);
         if let Some(p) = self.proxies[id as usize].as_mut() {
             if !p.moved {
                 p.moved = true;
@@ -347,6 +354,7 @@ impl CanopyBroadPhase {
 
         if !valid {
             if p.is_valid() {
+                self.mirror.touch(id);
                 self.take_out_of_tree(&mut p);
                 self.stats.invalid += 1;
                 self.proxies[id as usize] = Some(p);
@@ -678,6 +686,12 @@ impl BroadPhase for CanopyBroadPhase {
         events: &mut Vec<BroadPhasePairEvent>,
     ) {
         let events_before = events.len();
+        // This update sees every edit the overlay recorded (Rapier reports them as modified
+        // or removed); the mirror re-reads those proxies after it.
+        if !self.overlay.is_empty() {
+            let affected = self.overlay.clear();
+            self.mirror.touch_all(&affected);
+        }
         if modified_colliders.is_empty() && removed_colliders.is_empty() {
             // Nothing changed, so no pair can start or end.
             self.stats.moved = 0;

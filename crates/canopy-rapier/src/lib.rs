@@ -6,7 +6,9 @@
 //!
 //! Files: `broad_phase.rs` (the update), `proxy.rs` (per-collider state), `proxy_tree.rs` (one
 //! tree per mobility), `pair_set.rs` (live pairs and per-proxy partner lists), `filter.rs`
-//! (pairs the narrow phase would discard), `config.rs`, `stats.rs`.
+//! (pairs the narrow phase would discard), `config.rs`, `stats.rs`, and `queries/` (scene
+//! queries: ray, point and shape queries with Rapier's names, and Rapier's own
+//! `QueryPipeline` for the character controller).
 
 #![deny(missing_docs)]
 
@@ -16,9 +18,11 @@ mod filter;
 mod pair_set;
 mod proxy;
 mod proxy_tree;
+mod queries;
 mod stats;
 
 pub use broad_phase::CanopyBroadPhase;
 pub use config::{CanopyBroadPhaseConfig, RebuildPolicy};
 pub use filter::Mobility;
+pub use queries::SceneQueries;
 pub use stats::BroadPhaseStats;

@@ -7,7 +7,8 @@
 use crate::config::RebuildPolicy;
 use crate::filter::TreeFilterSummary;
 use crate::proxy::{Loc, Proxy};
-use canopy_core::{Aabb, BuildOptions, Builder, Bvh, PairMarks};
+use canopy_core::{Aabb, BuildOptions, Builder, Bvh, PairMarks, Ray};
+use rapier3d::na::Point3;
 
 /// Refits between two comparisons of the SAH cost with the cost after the last build.
 const COST_CHECK_INTERVAL: u32 = 4;
@@ -202,6 +203,142 @@ impl ProxyTree {
         self.dead = 0;
         self.built_cost = self.bvh.sah_cost(1.0, 1.0);
         self.rebuilds += 1;
+    }
+
+    /// The pending proxy ids with their tree (when it matches them), for the scene queries.
+    fn pending_parts(&self) -> (&[u32], Option<&Bvh>) {
+        (&self.pending, self.pending_bvh())
+    }
+
+    /// Calls `f` with every live proxy (members and pending) whose fat box overlaps `aabb`.
+    pub fn for_each_overlap(&self, proxies: &[Option<Proxy>], aabb: &Aabb, mut f: impl FnMut(u32)) {
+        self.query_members(aabb, &mut f);
+        match self.pending_parts() {
+            (pending, Some(bvh)) => bvh.for_each_overlap(aabb, |i| f(pending[i as usize])),
+            (pending, None) => {
+                for &id in pending {
+                    if proxies[id as usize]
+                        .as_ref()
+                        .is_some_and(|p| p.fat.intersects(aabb))
+                    {
+                        f(id);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Calls `f` with every live proxy whose fat box contains `point`.
+    pub fn for_each_containing_point(
+        &self,
+        proxies: &[Option<Proxy>],
+        point: &Point3<f32>,
+        f: impl FnMut(u32),
+    ) {
+        self.for_each_overlap(proxies, &Aabb::new(*point, *point), f);
+    }
+
+    /// The closest hit of `ray` within `t_max` over members and pending proxies: `hit(id,
+    /// best_t)` gives the exact time of impact with proxy `id` (as in `Bvh::cast_ray`).
+    pub fn cast_ray(
+        &self,
+        proxies: &[Option<Proxy>],
+        ray: &Ray,
+        t_max: f32,
+        mut hit: impl FnMut(u32, f32) -> Option<f32>,
+    ) -> Option<(u32, f32)> {
+        let mut best: Option<(u32, f32)> = None;
+        let mut best_t = t_max;
+        let members = &self.members;
+        if let Some(h) = self.bvh.cast_ray(ray, best_t, |slot, t| {
+            let id = members[slot as usize];
+            if id == DEAD {
+                None
+            } else {
+                hit(id, t)
+            }
+        }) {
+            best_t = h.t;
+            best = Some((members[h.primitive as usize], h.t));
+        }
+        match self.pending_parts() {
+            (pending, Some(bvh)) => {
+                if let Some(h) = bvh.cast_ray(ray, best_t, |i, t| hit(pending[i as usize], t)) {
+                    if best.is_none() || h.t < best_t {
+                        best = Some((pending[h.primitive as usize], h.t));
+                    }
+                }
+            }
+            (pending, None) => {
+                for &id in pending {
+                    let Some(p) = proxies[id as usize].as_ref() else {
+                        continue;
+                    };
+                    if ray.intersect_aabb(&p.fat, best_t).is_none() {
+                        continue;
+                    }
+                    if let Some(t) = hit(id, best_t) {
+                        if t <= best_t && (best.is_none() || t < best_t) {
+                            best_t = t;
+                            best = Some((id, t));
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    /// The proxy nearest to `point` within `max_distance`: `distance(id, best)` gives the exact
+    /// distance to proxy `id` (as in `Bvh::nearest`).
+    pub fn nearest(
+        &self,
+        proxies: &[Option<Proxy>],
+        point: &Point3<f32>,
+        max_distance: f32,
+        mut distance: impl FnMut(u32, f32) -> Option<f32>,
+    ) -> Option<(u32, f32)> {
+        let mut best: Option<(u32, f32)> = None;
+        let mut best_d = max_distance;
+        let members = &self.members;
+        if let Some(h) = self.bvh.nearest(point, best_d, |slot, d| {
+            let id = members[slot as usize];
+            if id == DEAD {
+                None
+            } else {
+                distance(id, d)
+            }
+        }) {
+            best_d = h.distance;
+            best = Some((members[h.primitive as usize], h.distance));
+        }
+        match self.pending_parts() {
+            (pending, Some(bvh)) => {
+                if let Some(h) = bvh.nearest(point, best_d, |i, d| distance(pending[i as usize], d))
+                {
+                    if best.is_none() || h.distance < best_d {
+                        best = Some((pending[h.primitive as usize], h.distance));
+                    }
+                }
+            }
+            (pending, None) => {
+                for &id in pending {
+                    let Some(p) = proxies[id as usize].as_ref() else {
+                        continue;
+                    };
+                    if p.fat.distance_to_point(point) > best_d {
+                        continue;
+                    }
+                    if let Some(d) = distance(id, best_d) {
+                        if d <= best_d && (best.is_none() || d < best_d) {
+                            best_d = d;
+                            best = Some((id, d));
+                        }
+                    }
+                }
+            }
+        }
+        best
     }
 
     /// Calls `f` with every live BVH member whose fat box overlaps `aabb` (pending excluded).

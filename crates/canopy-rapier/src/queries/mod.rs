@@ -1,0 +1,128 @@
+//! Scene queries on [`CanopyBroadPhase`]: what Rapier's `QueryPipeline` answers, culled by the
+//! broadphase's own canopy-core trees, with parry's exact shape tests.
+//!
+//! [`CanopyBroadPhase::scene_queries`] gives a [`SceneQueries`] with the methods of Rapier's
+//! `QueryPipeline`, same names, arguments and meanings. Files: `ray.rs` (ray casts, batched
+//! ray casts), `point.rs` (projection, containment), `shape.rs` (shape casts, shape and box
+//! intersection), `overlay.rs` (edits made since the last step: `refresh_queries`),
+//! `pipeline.rs` (`as_query_pipeline`: Rapier's own `QueryPipeline` over a lazily synced
+//! parry BVH, for the character controller and other code written against it).
+
+mod overlay;
+mod pipeline;
+mod point;
+mod ray;
+mod shape;
+
+pub(crate) use overlay::QueryOverlay;
+pub(crate) use pipeline::QueryMirror;
+
+use crate::broad_phase::CanopyBroadPhase;
+use crate::filter::Mobility;
+use canopy_core::Aabb;
+use rapier3d::parry::query::QueryDispatcher;
+use rapier3d::prelude::{Collider, ColliderHandle, ColliderSet, QueryFilter, RigidBodySet};
+
+/// Scene queries over a [`CanopyBroadPhase`] and the sets it was last updated with, with a
+/// [`QueryFilter`]: the methods of Rapier's `QueryPipeline` (same names, arguments and
+/// results), culled by canopy's trees. Get one from [`CanopyBroadPhase::scene_queries`].
+///
+/// The trees hold the colliders as of the broadphase's last update (every physics step
+/// ends with one). After inserting, moving, removing or disabling colliders outside a step,
+/// call [`CanopyBroadPhase::refresh_queries`] first; the exact tests always use each
+/// collider's current shape and position.
+///
+/// ```
+/// use canopy_rapier::CanopyBroadPhase;
+/// use rapier3d::prelude::*;
+///
+/// let bodies = RigidBodySet::new();
+/// let mut colliders = ColliderSet::new();
+/// let wall = colliders.insert(ColliderBuilder::cuboid(0.5, 5.0, 5.0).translation(vector![10.0, 0.0, 0.0]));
+/// let mut broad_phase = CanopyBroadPhase::new();
+/// // Without a step in between, make the broadphase see the new collider.
+/// broad_phase.refresh_queries(&bodies, &colliders);
+/// let narrow_phase = NarrowPhase::new();
+/// let queries = broad_phase.scene_queries(narrow_phase.query_dispatcher(), &bodies, &colliders, QueryFilter::default());
+/// let ray = Ray::new(point![0.0, 0.0, 0.0], vector![1.0, 0.0, 0.0]);
+/// assert_eq!(queries.cast_ray(&ray, 100.0, true), Some((wall, 9.5)));
+/// ```
+#[derive(Clone, Copy)]
+pub struct SceneQueries<'a> {
+    pub(crate) broad_phase: &'a CanopyBroadPhase,
+    /// The dispatcher for the exact shape-vs-shape tests (shape casts, shape intersections).
+    pub dispatcher: &'a dyn QueryDispatcher,
+    /// The rigid bodies of the colliders (for the filter's body-type flags).
+    pub bodies: &'a RigidBodySet,
+    /// The colliders the broadphase was updated with.
+    pub colliders: &'a ColliderSet,
+    /// Which colliders the queries consider.
+    pub filter: QueryFilter<'a>,
+}
+
+impl CanopyBroadPhase {
+    /// Scene queries over this broadphase, as Rapier's `BroadPhaseBvh::as_query_pipeline`
+    /// gives them (see [`SceneQueries`]).
+    pub fn scene_queries<'a>(
+        &'a self,
+        dispatcher: &'a dyn QueryDispatcher,
+        bodies: &'a RigidBodySet,
+        colliders: &'a ColliderSet,
+        filter: QueryFilter<'a>,
+    ) -> SceneQueries<'a> {
+        SceneQueries {
+            broad_phase: self,
+            dispatcher,
+            bodies,
+            colliders,
+            filter,
+        }
+    }
+}
+
+impl<'a> SceneQueries<'a> {
+    /// The same queries with a different filter.
+    pub fn with_filter(self, filter: QueryFilter<'a>) -> Self {
+        Self { filter, ..self }
+    }
+
+    /// The collider behind proxy `id` when it is current (not superseded by an edit since
+    /// the last update) and passes the filter.
+    #[inline]
+    pub(crate) fn collider(&self, id: u32) -> Option<(ColliderHandle, &'a Collider)> {
+        let bp = self.broad_phase;
+        if bp.overlay.is_stale(id) {
+            return None;
+        }
+        let handle = bp.proxies.get(id as usize)?.as_ref()?.handle;
+        let collider = self.colliders.get(handle)?;
+        (collider.is_enabled() && self.filter.test(self.bodies, handle, collider))
+            .then_some((handle, collider))
+    }
+
+    /// Colliders inserted or moved out of their fat boxes since the last update (see
+    /// [`CanopyBroadPhase::refresh_queries`]) that pass the filter, with their current boxes.
+    pub(crate) fn edited(&self) -> impl Iterator<Item = (ColliderHandle, &'a Collider, Aabb)> + '_ {
+        self.broad_phase
+            .overlay
+            .extra()
+            .iter()
+            .filter_map(move |&handle| {
+                let collider = self.colliders.get(handle)?;
+                if !collider.is_enabled() || !self.filter.test(self.bodies, handle, collider) {
+                    return None;
+                }
+                let aabb = collider.compute_aabb();
+                let aabb = Aabb::new(aabb.mins, aabb.maxs);
+                aabb.is_valid().then_some((handle, collider, aabb))
+            })
+    }
+
+    /// Calls `f` with every proxy whose fat box overlaps `aabb`, over the three trees.
+    pub(crate) fn cull_aabb(&self, aabb: &Aabb, mut f: impl FnMut(u32)) {
+        let bp = self.broad_phase;
+        for m in Mobility::ALL {
+            bp.trees[m as usize].for_each_overlap(&bp.proxies, aabb, &mut f);
+        }
+    }
+}

@@ -1,0 +1,170 @@
+//! Ray queries: closest hit (with or without the normal), every hit, and batches of rays cast
+//! in parallel with results in input order.
+
+use super::SceneQueries;
+use crate::filter::Mobility;
+use rapier3d::prelude::{Collider, ColliderHandle, QueryFilter, Ray, RayIntersection, Real};
+use rayon::prelude::*;
+
+impl<'a> SceneQueries<'a> {
+    /// The closest hit of `ray` within `max_toi` (in units of `ray.dir`), as Rapier's
+    /// `QueryPipeline::cast_ray`: `solid` makes a ray starting inside a shape hit it at 0.
+    pub fn cast_ray(
+        &self,
+        ray: &Ray,
+        max_toi: Real,
+        solid: bool,
+    ) -> Option<(ColliderHandle, Real)> {
+        self.closest_ray_hit(ray, max_toi, |collider, t_max| {
+            collider
+                .shape()
+                .cast_ray(collider.position(), ray, t_max, solid)
+                .map(|t| (t, ()))
+        })
+        .map(|(handle, t, ())| (handle, t))
+    }
+
+    /// The closest hit of `ray` with the surface normal there, as Rapier's
+    /// `QueryPipeline::cast_ray_and_get_normal`.
+    pub fn cast_ray_and_get_normal(
+        &self,
+        ray: &Ray,
+        max_toi: Real,
+        solid: bool,
+    ) -> Option<(ColliderHandle, RayIntersection)> {
+        self.closest_ray_hit(ray, max_toi, |collider, t_max| {
+            collider
+                .shape()
+                .cast_ray_and_get_normal(collider.position(), ray, t_max, solid)
+                .map(|hit| (hit.time_of_impact, hit))
+        })
+        .map(|(handle, _, hit)| (handle, hit))
+    }
+
+    /// Every collider `ray` hits within `max_toi`, with the hit, as Rapier's
+    /// `QueryPipeline::intersect_ray` (collected first: the order is the trees' traversal
+    /// order, the same for the same world and broadphase).
+    pub fn intersect_ray(
+        &self,
+        ray: Ray,
+        max_toi: Real,
+        solid: bool,
+    ) -> impl Iterator<Item = (ColliderHandle, &'a Collider, RayIntersection)> + 'a {
+        let mut hits = Vec::new();
+        let bp = self.broad_phase;
+        let cray = canopy_core::Ray::new(ray.origin, ray.dir);
+        let mut test = |handle: ColliderHandle, collider: &'a Collider| {
+            if let Some(hit) =
+                collider
+                    .shape()
+                    .cast_ray_and_get_normal(collider.position(), &ray, max_toi, solid)
+            {
+                hits.push((handle, collider, hit));
+            }
+        };
+        for m in Mobility::ALL {
+            bp.trees[m as usize].cast_ray(&bp.proxies, &cray, max_toi, |id, _| {
+                if let Some((handle, collider)) = self.collider(id) {
+                    test(handle, collider);
+                }
+                None
+            });
+        }
+        for (handle, collider, aabb) in self.edited() {
+            if cray.intersect_aabb(&aabb, max_toi).is_some() {
+                test(handle, collider);
+            }
+        }
+        hits.into_iter()
+    }
+
+    /// [`Self::cast_ray`] for every ray of `rays`, in parallel (rayon) when the filter has no
+    /// predicate closure (a closure is not required to be thread-safe; with one, the rays are
+    /// cast one after the other). Results are in the order of `rays` either way.
+    pub fn cast_rays(
+        &self,
+        rays: &[Ray],
+        max_toi: Real,
+        solid: bool,
+    ) -> Vec<Option<(ColliderHandle, Real)>> {
+        if self.filter.predicate.is_some() {
+            return rays
+                .iter()
+                .map(|r| self.cast_ray(r, max_toi, solid))
+                .collect();
+        }
+        // Rebuilt per ray from thread-safe parts: `QueryFilter` is not `Sync` (its predicate
+        // type has no `Sync` bound), everything else here is.
+        let (broad_phase, dispatcher, bodies, colliders) = (
+            self.broad_phase,
+            self.dispatcher,
+            self.bodies,
+            self.colliders,
+        );
+        let f = &self.filter;
+        let (flags, groups, exclude_collider, exclude_rigid_body) =
+            (f.flags, f.groups, f.exclude_collider, f.exclude_rigid_body);
+        rays.par_iter()
+            .with_min_len(64)
+            .map(|r| {
+                let queries = SceneQueries {
+                    broad_phase,
+                    dispatcher,
+                    bodies,
+                    colliders,
+                    filter: QueryFilter {
+                        flags,
+                        groups,
+                        exclude_collider,
+                        exclude_rigid_body,
+                        predicate: None,
+                    },
+                };
+                queries.cast_ray(r, max_toi, solid)
+            })
+            .collect()
+    }
+
+    /// The closest hit over the trees and the edited colliders; `exact(collider, best_t)`
+    /// gives the time of impact (and what else the caller wants) with one collider.
+    fn closest_ray_hit<T>(
+        &self,
+        ray: &Ray,
+        max_toi: Real,
+        mut exact: impl FnMut(&'a Collider, Real) -> Option<(Real, T)>,
+    ) -> Option<(ColliderHandle, Real, T)> {
+        let bp = self.broad_phase;
+        let cray = canopy_core::Ray::new(ray.origin, ray.dir);
+        let mut best: Option<(ColliderHandle, Real, T)> = None;
+        let mut best_t = max_toi;
+        for m in Mobility::ALL {
+            let mut found: Option<(ColliderHandle, Real, T)> = None;
+            bp.trees[m as usize].cast_ray(&bp.proxies, &cray, best_t, |id, t_max| {
+                let (handle, collider) = self.collider(id)?;
+                let (t, extra) = exact(collider, t_max)?;
+                if found.as_ref().is_none_or(|f| t < f.1) {
+                    found = Some((handle, t, extra));
+                }
+                Some(t)
+            });
+            if let Some(f) = found {
+                if best.is_none() || f.1 < best_t {
+                    best_t = f.1;
+                    best = Some(f);
+                }
+            }
+        }
+        for (handle, collider, aabb) in self.edited() {
+            if cray.intersect_aabb(&aabb, best_t).is_none() {
+                continue;
+            }
+            if let Some((t, extra)) = exact(collider, best_t) {
+                if t <= best_t && (best.is_none() || t < best_t) {
+                    best_t = t;
+                    best = Some((handle, t, extra));
+                }
+            }
+        }
+        best
+    }
+}

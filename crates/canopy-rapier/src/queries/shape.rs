@@ -1,0 +1,157 @@
+//! Shape queries: shape casts (first collider hit by a shape moving at constant velocity),
+//! colliders intersecting a shape, and colliders whose broadphase box meets a box.
+
+use super::SceneQueries;
+use canopy_core::Aabb;
+use rapier3d::parry::query::ShapeCastOptions;
+use rapier3d::prelude::{Collider, ColliderHandle, Isometry, Real, Shape, ShapeCastHit, Vector};
+
+fn to_canopy(aabb: &rapier3d::prelude::Aabb) -> Aabb {
+    Aabb::new(aabb.mins, aabb.maxs)
+}
+
+impl<'a> SceneQueries<'a> {
+    /// The first collider hit by `shape`, starting at `shape_pos` and moving at `shape_vel`,
+    /// as Rapier's `QueryPipeline::cast_shape` (witness and normal 1 on the collider, in world
+    /// space). Colliders whose boxes the swept box meets are tested in the order the moving box
+    /// reaches them, stopping once the next one is reached after the best hit.
+    pub fn cast_shape(
+        &self,
+        shape_pos: &Isometry<Real>,
+        shape_vel: &Vector<Real>,
+        shape: &dyn Shape,
+        options: ShapeCastOptions,
+    ) -> Option<(ColliderHandle, ShapeCastHit)> {
+        let start = shape.compute_aabb(shape_pos);
+        let max_toi = options.max_time_of_impact;
+        if max_toi.is_nan() || max_toi < 0.0 {
+            return None;
+        }
+        // The box swept over `[0, max_toi]` (a zero velocity component moves nothing, also
+        // with an infinite `max_toi`), grown by the target distance.
+        let mut swept = to_canopy(&start).loosened(options.target_distance.max(0.0));
+        for i in 0..3 {
+            let d = if shape_vel[i] == 0.0 {
+                0.0
+            } else {
+                shape_vel[i] * max_toi
+            };
+            if d < 0.0 {
+                swept.min[i] += d;
+            } else {
+                swept.max[i] += d;
+            }
+        }
+        if swept.min.iter().chain(swept.max.iter()).any(|c| c.is_nan()) {
+            return None;
+        }
+        // Entry time of the moving box into a collider box: a ray from the box centre against
+        // the collider box grown by the moving box's half extents (a Minkowski sum).
+        let half = start
+            .half_extents()
+            .add_scalar(options.target_distance.max(0.0));
+        let ray = canopy_core::Ray::new(start.center(), *shape_vel);
+        let entry = |b: &Aabb| {
+            let grown = Aabb::new(b.min - half, b.max + half);
+            ray.intersect_aabb(&grown, max_toi)
+        };
+        let bp = self.broad_phase;
+        let mut candidates: Vec<(Real, ColliderHandle, &'a Collider)> = Vec::new();
+        self.cull_aabb(&swept, |id| {
+            let Some(p) = bp.proxies[id as usize].as_ref() else {
+                return;
+            };
+            if let Some(t) = entry(&p.fat) {
+                if let Some((handle, collider)) = self.collider(id) {
+                    candidates.push((t, handle, collider));
+                }
+            }
+        });
+        for (handle, collider, aabb) in self.edited() {
+            if let Some(t) = entry(&aabb) {
+                candidates.push((t, handle, collider));
+            }
+        }
+        candidates.sort_by(|a, b| {
+            a.0.total_cmp(&b.0)
+                .then(a.1.into_raw_parts().cmp(&b.1.into_raw_parts()))
+        });
+        let mut best: Option<(ColliderHandle, ShapeCastHit)> = None;
+        for (t, handle, collider) in candidates {
+            if best.as_ref().is_some_and(|b| t > b.1.time_of_impact) {
+                break;
+            }
+            let pos = collider.position();
+            let hit = self.dispatcher.cast_shapes(
+                &pos.inv_mul(shape_pos),
+                &pos.inverse_transform_vector(shape_vel),
+                collider.shape(),
+                shape,
+                options,
+            );
+            if let Ok(Some(hit)) = hit {
+                if best
+                    .as_ref()
+                    .is_none_or(|b| hit.time_of_impact < b.1.time_of_impact)
+                {
+                    best = Some((handle, hit.transform1_by(pos)));
+                }
+            }
+        }
+        best
+    }
+
+    /// Every collider intersecting `shape` at `shape_pos`, as Rapier's
+    /// `QueryPipeline::intersect_shape`.
+    pub fn intersect_shape(
+        &self,
+        shape_pos: Isometry<Real>,
+        shape: &'a dyn Shape,
+    ) -> impl Iterator<Item = (ColliderHandle, &'a Collider)> + 'a {
+        let aabb = to_canopy(&shape.compute_aabb(&shape_pos));
+        let mut found = Vec::new();
+        let dispatcher = self.dispatcher;
+        let intersects = |collider: &Collider| {
+            let pos12 = shape_pos.inv_mul(collider.position());
+            dispatcher.intersection_test(&pos12, shape, collider.shape()) == Ok(true)
+        };
+        self.cull_aabb(&aabb, |id| {
+            if let Some((handle, collider)) = self.collider(id) {
+                if intersects(collider) {
+                    found.push((handle, collider));
+                }
+            }
+        });
+        for (handle, collider, b) in self.edited() {
+            if b.intersects(&aabb) && intersects(collider) {
+                found.push((handle, collider));
+            }
+        }
+        found.into_iter()
+    }
+
+    /// Every collider whose broadphase box intersects `aabb`, as Rapier's
+    /// `QueryPipeline::intersect_aabb_conservative`: the boxes are those stored at the last
+    /// update (fat boxes: the collider's box with prediction distance and soft-CCD motion, grown
+    /// by the margin and stretched along its velocity), so the result holds every collider whose
+    /// current box meets `aabb`, and possibly a few more, and no shape test is made. Colliders
+    /// edited since the last update count with their current box.
+    pub fn intersect_aabb_conservative(
+        &self,
+        aabb: rapier3d::prelude::Aabb,
+    ) -> impl Iterator<Item = (ColliderHandle, &'a Collider)> + 'a {
+        let aabb = to_canopy(&aabb);
+        let mut found = Vec::new();
+        self.cull_aabb(&aabb, |id| {
+            if let Some(hit) = self.collider(id) {
+                found.push(hit);
+            }
+        });
+        for (handle, collider, b) in self.edited() {
+            if b.intersects(&aabb) {
+                found.push((handle, collider));
+            }
+        }
+        found.into_iter()
+    }
+}
