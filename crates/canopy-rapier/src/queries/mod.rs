@@ -21,7 +21,25 @@ use crate::broad_phase::CanopyBroadPhase;
 use crate::filter::Mobility;
 use canopy_core::Aabb;
 use rapier3d::parry::query::QueryDispatcher;
-use rapier3d::prelude::{Collider, ColliderHandle, ColliderSet, QueryFilter, RigidBodySet};
+use rapier3d::prelude::{
+    Collider, ColliderHandle, ColliderSet, Isometry, QueryFilter, Ray, Real, RigidBodySet,
+};
+
+/// `true` when every coordinate is finite.
+pub(crate) fn finite<'v>(coords: impl IntoIterator<Item = &'v Real>) -> bool {
+    coords.into_iter().all(|c| c.is_finite())
+}
+
+/// `true` for a ray with a finite origin and direction and a time limit that is not NaN or
+/// negative (infinite is fine).
+pub(crate) fn valid_ray(ray: &Ray, max_toi: Real) -> bool {
+    finite(ray.origin.iter()) && finite(ray.dir.iter()) && max_toi >= 0.0
+}
+
+/// `true` for a pose with a finite translation and rotation.
+pub(crate) fn valid_pose(pose: &Isometry<Real>) -> bool {
+    finite(pose.translation.vector.iter()) && finite(pose.rotation.coords.iter())
+}
 
 /// Scene queries over a [`CanopyBroadPhase`] and the sets it was last updated with, with a
 /// [`QueryFilter`]: the methods of Rapier's `QueryPipeline` (same names, arguments and
@@ -30,7 +48,8 @@ use rapier3d::prelude::{Collider, ColliderHandle, ColliderSet, QueryFilter, Rigi
 /// The trees hold the colliders as of the broadphase's last update (every physics step
 /// ends with one). After inserting, moving, removing or disabling colliders outside a step,
 /// call [`CanopyBroadPhase::refresh_queries`] first; the exact tests always use each
-/// collider's current shape and position.
+/// collider's current shape and position. Invalid inputs (a NaN or infinite ray, point or
+/// pose, a NaN or negative time limit) find nothing; no query panics.
 ///
 /// ```
 /// use canopy_rapier::CanopyBroadPhase;

@@ -13,6 +13,10 @@ use rapier3d::prelude::{
 };
 use rustc_hash::FxHashMap;
 
+/// Margin of parry's change detection for updated leaves (Rapier's own value for length
+/// unit 1): a leaf is stored this much larger than the fat box.
+const CHANGE_MARGIN: f32 = 1.0e-2;
+
 /// The parry BVH behind `as_query_pipeline` and the proxies changed since it was synced.
 #[derive(Clone, Default)]
 pub(crate) struct QueryMirror {
@@ -155,8 +159,8 @@ impl CanopyBroadPhase {
         if self.mirror.dirty.is_empty() {
             return;
         }
-        let dirty = std::mem::take(&mut self.mirror.dirty);
-        let mut changed = false;
+        let mut dirty = std::mem::take(&mut self.mirror.dirty);
+        let mut updates = Vec::new();
         for &id in &dirty {
             self.mirror.is_dirty[id as usize] = false;
             let new = self.mirror_box(id, colliders, &extra);
@@ -164,18 +168,29 @@ impl CanopyBroadPhase {
             if i >= self.mirror.leaves.len() {
                 self.mirror.leaves.resize(i + 1, None);
             }
-            if self.mirror.leaves[i] == new {
-                continue;
+            if self.mirror.leaves[i] != new {
+                updates.push((id, new));
             }
-            changed = true;
-            match new {
-                Some(b) => self.mirror.bvh.insert_or_update_partially(b, id, 0.0),
-                None => self.mirror.bvh.remove(id),
-            }
-            self.mirror.leaves[i] = new;
         }
+        dirty.clear();
         self.mirror.dirty = dirty;
-        self.mirror.dirty.clear();
+        let changed = !updates.is_empty();
+        // In the order Rapier's broadphase uses the same tree: every removal (or move, taken
+        // out and put back) first, then the insertions, then optimisation and refit.
+        for &(id, _) in &updates {
+            if self.mirror.leaves[id as usize].is_some() {
+                self.mirror.bvh.remove(id);
+                self.mirror.leaves[id as usize] = None;
+            }
+        }
+        for &(id, new) in &updates {
+            if let Some(b) = new {
+                self.mirror
+                    .bvh
+                    .insert_or_update_partially(b, id, CHANGE_MARGIN);
+                self.mirror.leaves[id as usize] = Some(b);
+            }
+        }
         if changed {
             let mirror = &mut self.mirror;
             // As Rapier's own broadphase does: optimise a part of the tree, then refit.

@@ -1,6 +1,6 @@
 //! Point queries: projection on the closest collider, and the colliders containing a point.
 
-use super::SceneQueries;
+use super::{finite, SceneQueries};
 use crate::filter::Mobility;
 use rapier3d::prelude::{Collider, ColliderHandle, Point, PointProjection, Real};
 
@@ -16,6 +16,9 @@ impl<'a> SceneQueries<'a> {
         max_dist: Real,
         solid: bool,
     ) -> Option<(ColliderHandle, PointProjection)> {
+        if !finite(point.iter()) || max_dist.is_nan() || max_dist < 0.0 {
+            return None;
+        }
         let bp = self.broad_phase;
         let mut best: Option<(ColliderHandle, Real, PointProjection)> = None;
         let mut best_d = max_dist;
@@ -62,6 +65,9 @@ impl<'a> SceneQueries<'a> {
     ) -> impl Iterator<Item = (ColliderHandle, &'a Collider)> + 'a {
         let bp = self.broad_phase;
         let mut found = Vec::new();
+        if !finite(point.iter()) {
+            return found.into_iter();
+        }
         let contains =
             |collider: &Collider| collider.shape().contains_point(collider.position(), &point);
         for m in Mobility::ALL {

@@ -1,7 +1,7 @@
 //! Ray queries: closest hit (with or without the normal), every hit, and batches of rays cast
 //! in parallel with results in input order.
 
-use super::SceneQueries;
+use super::{valid_ray, SceneQueries};
 use crate::filter::Mobility;
 use rapier3d::prelude::{Collider, ColliderHandle, QueryFilter, Ray, RayIntersection, Real};
 use rayon::prelude::*;
@@ -51,6 +51,9 @@ impl<'a> SceneQueries<'a> {
         solid: bool,
     ) -> impl Iterator<Item = (ColliderHandle, &'a Collider, RayIntersection)> + 'a {
         let mut hits = Vec::new();
+        if !valid_ray(&ray, max_toi) {
+            return hits.into_iter();
+        }
         let bp = self.broad_phase;
         let cray = canopy_core::Ray::new(ray.origin, ray.dir);
         let mut test = |handle: ColliderHandle, collider: &'a Collider| {
@@ -133,6 +136,9 @@ impl<'a> SceneQueries<'a> {
         max_toi: Real,
         mut exact: impl FnMut(&'a Collider, Real) -> Option<(Real, T)>,
     ) -> Option<(ColliderHandle, Real, T)> {
+        if !valid_ray(ray, max_toi) {
+            return None;
+        }
         let bp = self.broad_phase;
         let cray = canopy_core::Ray::new(ray.origin, ray.dir);
         let mut best: Option<(ColliderHandle, Real, T)> = None;

@@ -1,7 +1,7 @@
 //! Shape queries: shape casts (first collider hit by a shape moving at constant velocity),
 //! colliders intersecting a shape, and colliders whose broadphase box meets a box.
 
-use super::SceneQueries;
+use super::{finite, valid_pose, SceneQueries};
 use canopy_core::Aabb;
 use rapier3d::parry::query::ShapeCastOptions;
 use rapier3d::prelude::{Collider, ColliderHandle, Isometry, Real, Shape, ShapeCastHit, Vector};
@@ -22,11 +22,12 @@ impl<'a> SceneQueries<'a> {
         shape: &dyn Shape,
         options: ShapeCastOptions,
     ) -> Option<(ColliderHandle, ShapeCastHit)> {
-        let start = shape.compute_aabb(shape_pos);
         let max_toi = options.max_time_of_impact;
-        if max_toi.is_nan() || max_toi < 0.0 {
+        if !valid_pose(shape_pos) || !finite(shape_vel.iter()) || max_toi.is_nan() || max_toi < 0.0
+        {
             return None;
         }
+        let start = shape.compute_aabb(shape_pos);
         // The box swept over `[0, max_toi]` (a zero velocity component moves nothing, also
         // with an infinite `max_toi`), grown by the target distance.
         let mut swept = to_canopy(&start).loosened(options.target_distance.max(0.0));
@@ -108,8 +109,11 @@ impl<'a> SceneQueries<'a> {
         shape_pos: Isometry<Real>,
         shape: &'a dyn Shape,
     ) -> impl Iterator<Item = (ColliderHandle, &'a Collider)> + 'a {
-        let aabb = to_canopy(&shape.compute_aabb(&shape_pos));
         let mut found = Vec::new();
+        if !valid_pose(&shape_pos) {
+            return found.into_iter();
+        }
+        let aabb = to_canopy(&shape.compute_aabb(&shape_pos));
         let dispatcher = self.dispatcher;
         let intersects = |collider: &Collider| {
             let pos12 = shape_pos.inv_mul(collider.position());

@@ -1,0 +1,585 @@
+//! Scene queries against Rapier's own `QueryPipeline` (over its `BroadPhaseBvh`) on the same
+//! random worlds: mixed shapes on fixed, kinematic and dynamic bodies and without a body,
+//! sensors, collision groups; some colliders removed, some moved, some disabled; random
+//! filters (flags, groups, excluded collider and body, a predicate). Closest queries give
+//! the same time of impact (within 1e-5) and the same collider unless two hits tie;
+//! intersection queries give the same sets. Checked after a broadphase update, and after
+//! edits made without one (canopy's `refresh_queries` against Rapier updated with them).
+//! `as_query_pipeline` (Rapier's pipeline over canopy's synced parry BVH) is checked the same
+//! way. `intersect_aabb_conservative` is checked against brute force: it holds every collider
+//! whose current box meets the query box, and nothing farther than the fat-box margin.
+
+use canopy_rapier::{CanopyBroadPhase, SceneQueries};
+use proptest::prelude::*;
+use rapier3d::parry::query::ShapeCastOptions;
+use rapier3d::prelude::*;
+use std::collections::BTreeSet;
+
+const TOL: f32 = 1.0e-5;
+
+/// SplitMix64: small, seeded, reproducible.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn f(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+    fn v(&mut self, lo: f32, hi: f32) -> Vector<Real> {
+        vector![self.f(lo, hi), self.f(lo, hi), self.f(lo, hi)]
+    }
+}
+
+fn random_shape(rng: &mut Rng) -> SharedShape {
+    match rng.below(8) {
+        0 => SharedShape::ball(rng.f(0.2, 1.0)),
+        1 => SharedShape::cuboid(rng.f(0.1, 1.0), rng.f(0.1, 1.0), rng.f(0.1, 1.0)),
+        2 => SharedShape::capsule_y(rng.f(0.1, 0.8), rng.f(0.1, 0.5)),
+        3 => SharedShape::cylinder(rng.f(0.1, 0.8), rng.f(0.1, 0.6)),
+        4 => SharedShape::cone(rng.f(0.1, 0.8), rng.f(0.1, 0.6)),
+        5 => {
+            let points: Vec<Point<Real>> = (0..8).map(|_| rng.v(-0.7, 0.7).into()).collect();
+            SharedShape::convex_hull(&points).unwrap_or_else(|| SharedShape::ball(0.5))
+        }
+        6 => SharedShape::round_cuboid(rng.f(0.1, 0.6), rng.f(0.1, 0.6), rng.f(0.1, 0.6), 0.1),
+        _ => {
+            // A small bumpy mesh (a composite shape: parry recurses into its triangles).
+            let n = 3;
+            let mut vertices = Vec::new();
+            for i in 0..=n {
+                for j in 0..=n {
+                    vertices.push(point![i as f32 - 1.5, rng.f(-0.2, 0.2), j as f32 - 1.5]);
+                }
+            }
+            let mut indices = Vec::new();
+            for i in 0..n {
+                for j in 0..n {
+                    let a = (i * (n + 1) + j) as u32;
+                    let b = a + 1;
+                    let c = a + (n + 1) as u32;
+                    indices.push([a, c, b]);
+                    indices.push([b, c, c + 1]);
+                }
+            }
+            SharedShape::trimesh(vertices, indices).unwrap()
+        }
+    }
+}
+
+fn random_pose(rng: &mut Rng, extent: f32) -> Isometry<Real> {
+    Isometry::new(rng.v(-extent, extent), rng.v(-3.0, 3.0))
+}
+
+struct World {
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    islands: IslandManager,
+    rapier: BroadPhaseBvh,
+    canopy: CanopyBroadPhase,
+    narrow: NarrowPhase,
+    params: IntegrationParameters,
+    extent: f32,
+    /// Edits since the last update (modified and removed handles).
+    modified: Vec<ColliderHandle>,
+    removed: Vec<ColliderHandle>,
+    /// Edits canopy has not had an update for yet (Rapier's pipeline keeps its modified list
+    /// until the next step the same way).
+    canopy_modified: Vec<ColliderHandle>,
+    canopy_removed: Vec<ColliderHandle>,
+}
+
+impl World {
+    fn new(rng: &mut Rng, n: usize) -> Self {
+        let mut w = World {
+            bodies: RigidBodySet::new(),
+            colliders: ColliderSet::new(),
+            islands: IslandManager::new(),
+            rapier: BroadPhaseBvh::new(),
+            canopy: CanopyBroadPhase::new(),
+            narrow: NarrowPhase::new(),
+            params: IntegrationParameters::default(),
+            extent: 1.5 * (n as f32).cbrt() + 1.0,
+            modified: Vec::new(),
+            removed: Vec::new(),
+            canopy_modified: Vec::new(),
+            canopy_removed: Vec::new(),
+        };
+        for _ in 0..n {
+            w.insert(rng);
+        }
+        w
+    }
+
+    fn insert(&mut self, rng: &mut Rng) {
+        let pose = random_pose(rng, self.extent);
+        let groups = InteractionGroups::new(
+            Group::from_bits_truncate(1 << rng.below(3)),
+            Group::from_bits_truncate(0b111 ^ (1 << rng.below(3))),
+        );
+        let builder = ColliderBuilder::new(random_shape(rng))
+            .sensor(rng.below(6) == 0)
+            .collision_groups(groups);
+        let handle = match rng.below(4) {
+            0 => self.colliders.insert(builder.position(pose)),
+            k => {
+                let body = match k {
+                    1 => RigidBodyBuilder::fixed(),
+                    2 => RigidBodyBuilder::kinematic_position_based(),
+                    _ => RigidBodyBuilder::dynamic(),
+                };
+                let body = self.bodies.insert(body.position(pose));
+                self.colliders
+                    .insert_with_parent(builder, body, &mut self.bodies)
+            }
+        };
+        self.modified.push(handle);
+    }
+
+    /// Random edits: moves, removals, disables, insertions.
+    fn edit(&mut self, rng: &mut Rng) {
+        let handles: Vec<ColliderHandle> = self.colliders.iter().map(|(h, _)| h).collect();
+        for h in handles {
+            match rng.below(10) {
+                0 | 1 => {
+                    let pose = random_pose(rng, self.extent);
+                    self.colliders[h].set_position(pose);
+                    self.modified.push(h);
+                }
+                2 => {
+                    let p = *self.colliders[h].position();
+                    let small = Isometry::new(rng.v(-0.05, 0.05), rng.v(-0.05, 0.05));
+                    self.colliders[h].set_position(small * p);
+                    self.modified.push(h);
+                }
+                3 => {
+                    self.colliders
+                        .remove(h, &mut self.islands, &mut self.bodies, false);
+                    self.removed.push(h);
+                }
+                4 => {
+                    let enabled = self.colliders[h].is_enabled();
+                    self.colliders[h].set_enabled(!enabled);
+                    self.modified.push(h);
+                }
+                _ => {}
+            }
+        }
+        for _ in 0..rng.below(4) {
+            self.insert(rng);
+        }
+    }
+
+    /// Rapier's broadphase sees the edits; canopy's too when `update_canopy`, else canopy only
+    /// refreshes its queries.
+    fn sync(&mut self, update_canopy: bool) {
+        let modified = std::mem::take(&mut self.modified);
+        let removed = std::mem::take(&mut self.removed);
+        self.canopy_modified.extend_from_slice(&modified);
+        self.canopy_removed.extend_from_slice(&removed);
+        let mut events = Vec::new();
+        let (modified, removed) = self.reported(modified, removed);
+        self.rapier.update(
+            &self.params,
+            &self.colliders,
+            &self.bodies,
+            &modified,
+            &removed,
+            &mut events,
+        );
+        if update_canopy {
+            let modified = std::mem::take(&mut self.canopy_modified);
+            let removed = std::mem::take(&mut self.canopy_removed);
+            let (modified, removed) = self.reported(modified, removed);
+            self.canopy.update(
+                &self.params,
+                &self.colliders,
+                &self.bodies,
+                &modified,
+                &removed,
+                &mut events,
+            );
+        } else {
+            self.canopy.refresh_queries(&self.bodies, &self.colliders);
+        }
+    }
+
+    /// The modified and removed lists as Rapier's pipeline reports them: modified colliders
+    /// that still exist, once each; disabled colliders also as removed.
+    fn reported(
+        &self,
+        mut modified: Vec<ColliderHandle>,
+        mut removed: Vec<ColliderHandle>,
+    ) -> (Vec<ColliderHandle>, Vec<ColliderHandle>) {
+        modified.retain(|h| self.colliders.contains(*h));
+        modified.sort_by_key(|h| h.into_raw_parts());
+        modified.dedup();
+        removed.extend(
+            modified
+                .iter()
+                .filter(|h| !self.colliders[**h].is_enabled())
+                .copied(),
+        );
+        (modified, removed)
+    }
+}
+
+/// A random filter; `predicate` is the closure to use when the filter gets one.
+fn random_filter<'a>(
+    rng: &mut Rng,
+    world: &World,
+    predicate: &'a dyn Fn(ColliderHandle, &Collider) -> bool,
+) -> QueryFilter<'a> {
+    let mut filter = QueryFilter::default();
+    let flags = [
+        QueryFilterFlags::empty(),
+        QueryFilterFlags::EXCLUDE_FIXED,
+        QueryFilterFlags::EXCLUDE_DYNAMIC,
+        QueryFilterFlags::EXCLUDE_KINEMATIC,
+        QueryFilterFlags::EXCLUDE_SENSORS,
+        QueryFilterFlags::EXCLUDE_SOLIDS,
+        QueryFilterFlags::ONLY_DYNAMIC,
+    ];
+    if rng.below(2) == 0 {
+        filter.flags = flags[rng.below(flags.len())];
+    }
+    if rng.below(3) == 0 {
+        filter.groups = Some(InteractionGroups::new(
+            Group::from_bits_truncate(1 << rng.below(3)),
+            Group::ALL,
+        ));
+    }
+    let handles: Vec<ColliderHandle> = world.colliders.iter().map(|(h, _)| h).collect();
+    if !handles.is_empty() && rng.below(3) == 0 {
+        filter.exclude_collider = Some(handles[rng.below(handles.len())]);
+    }
+    if !handles.is_empty() && rng.below(3) == 0 {
+        let h = handles[rng.below(handles.len())];
+        filter.exclude_rigid_body = world.colliders[h].parent();
+    }
+    if rng.below(4) == 0 {
+        filter.predicate = Some(predicate);
+    }
+    filter
+}
+
+fn set<T: Ord>(items: impl Iterator<Item = T>) -> BTreeSet<T> {
+    items.collect()
+}
+
+fn key(h: ColliderHandle) -> (u32, u32) {
+    h.into_raw_parts()
+}
+
+/// Same collider, or a tie: both hit at the same time.
+fn same_closest(
+    what: &str,
+    canopy: Option<(ColliderHandle, f32)>,
+    rapier: Option<(ColliderHandle, f32)>,
+) -> Result<(), TestCaseError> {
+    match (canopy, rapier) {
+        (None, None) => Ok(()),
+        (Some((a, ta)), Some((b, tb))) => {
+            prop_assert!(
+                (ta - tb).abs() <= TOL * tb.abs().max(1.0),
+                "{what}: time {ta} ({a:?}) vs Rapier {tb} ({b:?})"
+            );
+            Ok(())
+        }
+        (c, r) => Err(TestCaseError::fail(format!(
+            "{what}: canopy {c:?} vs Rapier {r:?}"
+        ))),
+    }
+}
+
+/// Every query, canopy's `SceneQueries` (and Rapier's pipeline over canopy's mirror) against
+/// Rapier's pipeline over its own broadphase.
+fn check_queries(world: &mut World, rng: &mut Rng) -> Result<(), TestCaseError> {
+    let predicate = |h: ColliderHandle, _: &Collider| h.into_raw_parts().0 % 3 != 0;
+    let fat_boxes: std::collections::BTreeMap<(u32, u32), Option<Aabb>> = world
+        .colliders
+        .iter()
+        .map(|(h, _)| {
+            let fat = world.canopy.fat_aabb(h).map(|f| Aabb::new(f.min, f.max));
+            (key(h), fat)
+        })
+        .collect();
+    for round in 0..6 {
+        let filter = random_filter(rng, world, &predicate);
+        let dispatcher = world.narrow.query_dispatcher();
+        let rapier =
+            world
+                .rapier
+                .as_query_pipeline(dispatcher, &world.bodies, &world.colliders, filter);
+        let canopy: SceneQueries =
+            world
+                .canopy
+                .scene_queries(dispatcher, &world.bodies, &world.colliders, filter);
+        let any_passes = world
+            .colliders
+            .iter()
+            .any(|(h, c)| c.is_enabled() && filter.test(&world.bodies, h, c));
+        let e = world.extent;
+
+        // Rays: random and aimed at colliders; `cast_rays` in one batch.
+        let mut rays = Vec::new();
+        for _ in 0..24 {
+            let origin: Point<Real> = rng.v(-e - 2.0, e + 2.0).into();
+            let target: Point<Real> = rng.v(-e, e).into();
+            let dir = (target - origin) * rng.f(0.2, 2.0);
+            rays.push(Ray::new(origin, dir));
+        }
+        let max_toi = [Real::MAX, 1.0, 3.0][round % 3];
+        let solid = round % 2 == 0;
+        let batch = canopy.cast_rays(&rays, max_toi, solid);
+        for (i, ray) in rays.iter().enumerate() {
+            let r = rapier.cast_ray(ray, max_toi, solid);
+            let c = canopy.cast_ray(ray, max_toi, solid);
+            same_closest("cast_ray", c, r)?;
+            prop_assert_eq!(batch[i], c, "cast_rays differs from cast_ray");
+            let rn = rapier.cast_ray_and_get_normal(ray, max_toi, solid);
+            let cn = canopy.cast_ray_and_get_normal(ray, max_toi, solid);
+            same_closest(
+                "cast_ray_and_get_normal",
+                cn.map(|(h, i)| (h, i.time_of_impact)),
+                rn.map(|(h, i)| (h, i.time_of_impact)),
+            )?;
+            if let (Some((a, ia)), Some((b, ib))) = (cn, rn) {
+                if a == b {
+                    prop_assert!((ia.normal - ib.normal).norm() <= 1.0e-4);
+                }
+            }
+            let rs = set(rapier.intersect_ray(*ray, max_toi, solid).map(|x| key(x.0)));
+            let cs = set(canopy.intersect_ray(*ray, max_toi, solid).map(|x| key(x.0)));
+            prop_assert_eq!(cs, rs, "intersect_ray");
+        }
+
+        // Points.
+        for _ in 0..16 {
+            let p: Point<Real> = rng.v(-e - 1.0, e + 1.0).into();
+            let rs = set(rapier.intersect_point(p).map(|x| key(x.0)));
+            let cs = set(canopy.intersect_point(p).map(|x| key(x.0)));
+            prop_assert_eq!(cs, rs, "intersect_point");
+            let c = canopy.project_point(&p, Real::MAX, solid);
+            if any_passes {
+                let r = rapier.project_point(&p, Real::MAX, solid);
+                let brute = world
+                    .colliders
+                    .iter()
+                    .filter(|(h, c)| c.is_enabled() && filter.test(&world.bodies, *h, c))
+                    .map(|(h, c)| {
+                        let pr = c.shape().project_point(c.position(), &p, solid);
+                        ((pr.point - p).norm(), h)
+                    })
+                    .min_by(|a, b| a.0.total_cmp(&b.0));
+                same_closest(
+                    "project_point (brute force)",
+                    c.map(|(h, pr)| (h, (pr.point - p).norm())),
+                    brute.map(|(d, h)| (h, d)),
+                )?;
+                same_closest(
+                    "project_point",
+                    c.map(|(h, pr)| (h, (pr.point - p).norm())),
+                    r.map(|(h, pr)| (h, (pr.point - p).norm())),
+                )?;
+                // A limit closer than the nearest collider finds nothing.
+                if let Some((_, pr)) = c {
+                    let d = (pr.point - p).norm();
+                    if d > 0.01 {
+                        prop_assert!(canopy.project_point(&p, d * 0.99, solid).is_none());
+                    }
+                }
+            } else {
+                prop_assert!(c.is_none());
+            }
+        }
+
+        // Shapes.
+        for _ in 0..8 {
+            let shape =
+                [SharedShape::ball(0.3), SharedShape::cuboid(0.4, 0.2, 0.3)][rng.below(2)].clone();
+            let pos = random_pose(rng, e + 1.0);
+            let rs = set(rapier.intersect_shape(pos, &*shape).map(|x| key(x.0)));
+            let cs = set(canopy.intersect_shape(pos, &*shape).map(|x| key(x.0)));
+            prop_assert_eq!(cs, rs, "intersect_shape");
+            let vel = rng.v(-1.0, 1.0) * e;
+            let options = ShapeCastOptions {
+                max_time_of_impact: rng.f(0.5, 2.0),
+                target_distance: [0.0, 0.05][rng.below(2)],
+                stop_at_penetration: rng.below(2) == 0,
+                compute_impact_geometry_on_penetration: true,
+            };
+            let r = rapier.cast_shape(&pos, &vel, &*shape, options);
+            let c = canopy.cast_shape(&pos, &vel, &*shape, options);
+            same_closest(
+                "cast_shape",
+                c.map(|(h, hit)| (h, hit.time_of_impact)),
+                r.map(|(h, hit)| (h, hit.time_of_impact)),
+            )?;
+
+            // Conservative box query against brute force over current boxes.
+            let query = shape.compute_aabb(&pos).loosened(rng.f(0.0, 1.0));
+            let found = set(canopy.intersect_aabb_conservative(query).map(|x| key(x.0)));
+            for (h, c) in world.colliders.iter() {
+                if !c.is_enabled() || !filter.test(&world.bodies, h, c) {
+                    prop_assert!(!found.contains(&key(h)), "filtered collider returned");
+                    continue;
+                }
+                let b = c.compute_aabb();
+                if b.intersects(&query) {
+                    prop_assert!(
+                        found.contains(&key(h)),
+                        "intersect_aabb_conservative missed {h:?}"
+                    );
+                }
+                // Extras only through the stored fat box (which holds the current box unless
+                // the collider was edited since the last update).
+                if found.contains(&key(h)) {
+                    let fat = fat_boxes.get(&key(h)).copied().flatten();
+                    prop_assert!(
+                        b.intersects(&query)
+                            || fat.is_some_and(|f| f
+                                .mins
+                                .iter()
+                                .zip(f.maxs.iter())
+                                .zip(query.mins.iter().zip(query.maxs.iter()))
+                                .all(|((lo, hi), (qlo, qhi))| lo <= qhi && qlo <= hi)),
+                        "{h:?} returned but neither its box nor its fat box meets the query"
+                    );
+                }
+            }
+        }
+    }
+
+    // Rapier's own pipeline over canopy's mirror answers like Rapier's over its own BVH.
+    let filter = QueryFilter::default();
+    let dispatcher = world.narrow.query_dispatcher();
+    let rays: Vec<Ray> = (0..16)
+        .map(|_| {
+            let origin: Point<Real> = rng.v(-world.extent - 2.0, world.extent + 2.0).into();
+            Ray::new(origin, -origin.coords)
+        })
+        .collect();
+    let expected: Vec<_> = {
+        let rapier =
+            world
+                .rapier
+                .as_query_pipeline(dispatcher, &world.bodies, &world.colliders, filter);
+        rays.iter().map(|r| rapier.cast_ray(r, 2.0, true)).collect()
+    };
+    let mirror =
+        world
+            .canopy
+            .as_query_pipeline(dispatcher, &world.bodies, &world.colliders, filter);
+    for (ray, r) in rays.iter().zip(expected) {
+        same_closest(
+            "as_query_pipeline cast_ray",
+            mirror.cast_ray(ray, 2.0, true),
+            r,
+        )?;
+    }
+    Ok(())
+}
+
+fn run(seed: u64, n: usize, rounds: usize) -> Result<(), TestCaseError> {
+    let mut rng = Rng(seed);
+    let mut world = World::new(&mut rng, n);
+    world.sync(true);
+    check_queries(&mut world, &mut rng)?;
+    for round in 0..rounds {
+        world.edit(&mut rng);
+        // Every other round, edits reach canopy's queries without an update.
+        world.sync(round % 2 == 1);
+        check_queries(&mut world, &mut rng)?;
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    #[test]
+    fn queries_match_rapier(seed in any::<u64>(), n in 0usize..60, rounds in 1usize..4) {
+        run(seed, n, rounds)?;
+    }
+}
+
+#[test]
+fn empty_world_answers_nothing() {
+    let bodies = RigidBodySet::new();
+    let colliders = ColliderSet::new();
+    let narrow = NarrowPhase::new();
+    let bp = CanopyBroadPhase::new();
+    let q = bp.scene_queries(
+        narrow.query_dispatcher(),
+        &bodies,
+        &colliders,
+        QueryFilter::default(),
+    );
+    let ray = Ray::new(point![0.0, 0.0, 0.0], vector![1.0, 0.0, 0.0]);
+    assert_eq!(q.cast_ray(&ray, Real::MAX, true), None);
+    assert!(q
+        .project_point(&point![0.0, 0.0, 0.0], Real::MAX, true)
+        .is_none());
+    assert_eq!(q.intersect_point(point![0.0, 0.0, 0.0]).count(), 0);
+    assert_eq!(q.cast_rays(&[ray; 100], 1.0, true), vec![None; 100]);
+}
+
+#[test]
+fn bad_inputs_give_no_hits_and_no_panic() {
+    let mut rng = Rng(7);
+    let mut world = World::new(&mut rng, 30);
+    world.sync(true);
+    let q = world.canopy.scene_queries(
+        world.narrow.query_dispatcher(),
+        &world.bodies,
+        &world.colliders,
+        QueryFilter::default(),
+    );
+    let nan = Ray::new(point![f32::NAN, 0.0, 0.0], vector![1.0, 0.0, 0.0]);
+    assert_eq!(q.cast_ray(&nan, Real::MAX, true), None);
+    let zero = Ray::new(point![100.0, 0.0, 0.0], vector![0.0, 0.0, 0.0]);
+    assert_eq!(q.cast_ray(&zero, Real::MAX, true), None);
+    let r = Ray::new(point![0.0, 0.0, 0.0], vector![1.0, 0.0, 0.0]);
+    assert_eq!(q.cast_ray(&r, f32::NAN, true), None);
+    assert_eq!(q.cast_ray(&r, -1.0, true), None);
+    assert!(q
+        .project_point(&point![f32::NAN, 0.0, 0.0], Real::MAX, true)
+        .is_none());
+    let options = ShapeCastOptions {
+        max_time_of_impact: f32::NAN,
+        ..Default::default()
+    };
+    let ball = Ball::new(0.5);
+    assert!(q
+        .cast_shape(
+            &Isometry::identity(),
+            &vector![1.0, 0.0, 0.0],
+            &ball,
+            options
+        )
+        .is_none());
+    let options = ShapeCastOptions::with_max_time_of_impact(Real::MAX);
+    // An unbounded cast is answered (and is the same as a long bounded one).
+    let far = q.cast_shape(
+        &Isometry::translation(-100.0, 0.0, 0.0),
+        &vector![1.0, 0.0, 0.0],
+        &ball,
+        options,
+    );
+    let long = q.cast_shape(
+        &Isometry::translation(-100.0, 0.0, 0.0),
+        &vector![1.0, 0.0, 0.0],
+        &ball,
+        ShapeCastOptions::with_max_time_of_impact(1.0e4),
+    );
+    assert_eq!(far.map(|h| h.0), long.map(|h| h.0));
+}
