@@ -84,7 +84,7 @@ pub struct CanopyBroadPhase {
     is_touched: Vec<bool>,
     /// Per proxy id: the exact collision box at the last update that saw the collider. Kept
     /// apart from the proxies so the liveness pass reads one dense array.
-    tights: Vec<Aabb>,
+    pub(crate) tights: Vec<Aabb>,
     /// Reused buffers: a bitmap of the modified handles' indices (all zero between updates)
     /// and their generations.
     scratch_order: (Vec<u64>, Vec<u32>),
@@ -230,17 +230,19 @@ impl CanopyBroadPhase {
         Aabb::new(aabb.mins, aabb.maxs)
     }
 
-    /// The fat box of an exact box: enlarged by the margin, and stretched along the parent's
+    /// The fat box of an exact box: enlarged by the margin (`margins.1` for colliders of fixed
+    /// bodies or without a body, `margins.0` for the others), and stretched along the parent's
     /// linear velocity over `velocity_steps` steps.
     #[inline]
     fn fat_box(
         velocity_steps: f32,
         tight: &Aabb,
-        margin: f32,
+        margins: (f32, f32),
         params: &IntegrationParameters,
         parent: Option<&RigidBody>,
     ) -> Aabb {
-        let mut fat = tight.loosened(margin);
+        let fixed = parent.is_none_or(|rb| rb.is_fixed());
+        let mut fat = tight.loosened(if fixed { margins.1 } else { margins.0 });
         if let Some(rb) = parent {
             let d = rb.linvel() * (params.dt * velocity_steps);
             for i in 0..3 {
@@ -262,7 +264,7 @@ impl CanopyBroadPhase {
         colliders: &ColliderSet,
         bodies: &RigidBodySet,
         handle: ColliderHandle,
-        margin: f32,
+        margins: (f32, f32),
         events: &mut Vec<BroadPhasePairEvent>,
     ) {
         let id = handle.into_raw_parts().0;
@@ -289,7 +291,7 @@ impl CanopyBroadPhase {
                 if p.fat.contains(&tight) {
                     return;
                 }
-                let fat = Self::fat_box(velocity_steps, &tight, margin, params, parent);
+                let fat = Self::fat_box(velocity_steps, &tight, margins, params, parent);
                 if fat.is_valid() {
                     p.fat = fat;
                     self.trees[p.mobility as usize].set_box(p);
@@ -313,7 +315,7 @@ impl CanopyBroadPhase {
         let tight = Self::collision_aabb(params, collider, parent);
         let filter = FilterData::new(collider, parent);
         let mobility = Mobility::of(filter.body_type);
-        let fat = Self::fat_box(velocity_steps, &tight, margin, params, parent);
+        let fat = Self::fat_box(velocity_steps, &tight, margins, params, parent);
         let valid = tight.is_valid() && fat.is_valid();
 
         if id as usize >= self.proxies.len() {
@@ -707,7 +709,10 @@ impl BroadPhase for CanopyBroadPhase {
         }
 
         // 2. Re-examine every modified collider.
-        let margin = self.config.margin * params.length_unit;
+        let margins = (
+            self.config.margin * params.length_unit,
+            self.config.fixed_margin * params.length_unit,
+        );
         // In handle order (a bitmap of the modified indices, read back in order): the collider
         // arena and the proxies are then read front to back, which the hardware prefetcher
         // turns into streaming instead of one cache miss per collider.
@@ -728,7 +733,7 @@ impl BroadPhase for CanopyBroadPhase {
                 *word &= *word - 1;
                 let index = w as u32 * 64 + bit;
                 let handle = ColliderHandle::from_raw_parts(index, generations[index as usize]);
-                self.examine(params, colliders, bodies, handle, margin, events);
+                self.examine(params, colliders, bodies, handle, margins, events);
             }
         }
         self.scratch_order = (bits, generations);

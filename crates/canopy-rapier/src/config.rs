@@ -46,6 +46,11 @@ pub struct CanopyBroadPhaseConfig {
     /// inside, the collider costs nothing. Larger margins mean fewer updates but more candidate
     /// pairs. Default: 0.1 (Box2D's `b2_aabbMargin`).
     pub margin: f32,
+    /// Margin of the fat boxes of colliders attached to fixed bodies or to no body, in the same
+    /// unit. They only move when the user moves them, so a margin buys them nothing but extra
+    /// candidate pairs and looser boxes for the scene queries. Default: 0 (as Box2D v3 gives
+    /// static shapes no margin).
+    pub fixed_margin: f32,
     /// Fat boxes also cover where the collider will be after this many steps at its parent's
     /// current linear velocity, so that steadily moving bodies stay inside their box for that
     /// long. 0 disables it. It never affects correctness (every step still checks the exact
@@ -63,6 +68,7 @@ impl Default for CanopyBroadPhaseConfig {
     fn default() -> Self {
         Self {
             margin: 0.1,
+            fixed_margin: 0.0,
             velocity_steps: 2.0,
             rebuild: RebuildPolicy::default(),
             parallel: true,

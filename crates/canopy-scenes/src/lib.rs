@@ -31,11 +31,13 @@
 #![deny(unsafe_code)]
 
 pub mod harness;
+mod rays;
 mod rng;
 mod scene;
 pub mod scenes;
 mod world;
 
+pub use rays::ray_batch;
 pub use rng::XorShift;
 pub use scene::{HookCtx, Scene, Size, StepHook};
 pub use scenes::{

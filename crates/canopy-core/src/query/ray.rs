@@ -93,19 +93,61 @@ impl Bvh {
                 // A leaf of one primitive has that primitive's box (builders and refit make
                 // leaf boxes from their primitives), which the ray was just seen to enter
                 // before `best_t`: no second slab test.
-                let single = node.count == 1;
-                for slot in node.leaf_range() {
-                    let b = &self.prim_bounds[slot];
-                    if !single && ray.slab(&b.min, &b.max, best_t).is_none() {
-                        continue;
-                    }
-                    let prim = self.prim_indices[slot];
+                let range = node.leaf_range();
+                if range.len() == 1 {
+                    let prim = self.prim_indices[range.start];
                     if let Some(t) = hit(prim, best_t) {
                         if t <= best_t && (best.is_none() || t < best_t) {
                             best_t = t;
                             best = Some(RayHit { primitive: prim, t });
                             if ANY {
                                 return best;
+                            }
+                        }
+                    }
+                } else {
+                    // Primitives in the order the ray enters their boxes, so that the nearest
+                    // hit comes first and the primitives behind it are skipped (the exact test
+                    // is usually the expensive part). Leaves larger than `SORTED_LEAF` are
+                    // taken in storage order.
+                    let mut order = [(0.0f32, 0u32); SORTED_LEAF];
+                    let mut len = 0;
+                    let sort = range.len() <= SORTED_LEAF;
+                    for slot in range {
+                        let b = &self.prim_bounds[slot];
+                        let Some(entry) = ray.slab(&b.min, &b.max, best_t) else {
+                            continue;
+                        };
+                        if sort {
+                            order[len] = (entry, slot as u32);
+                            len += 1;
+                            continue;
+                        }
+                        let prim = self.prim_indices[slot];
+                        if let Some(t) = hit(prim, best_t) {
+                            if t <= best_t && (best.is_none() || t < best_t) {
+                                best_t = t;
+                                best = Some(RayHit { primitive: prim, t });
+                                if ANY {
+                                    return best;
+                                }
+                            }
+                        }
+                    }
+                    let order = &mut order[..len];
+                    order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                    for &(entry, slot) in order.iter() {
+                        if entry > best_t {
+                            break;
+                        }
+                        let prim = self.prim_indices[slot as usize];
+                        if let Some(t) = hit(prim, best_t) {
+                            if t <= best_t && (best.is_none() || t < best_t) {
+                                best_t = t;
+                                best = Some(RayHit { primitive: prim, t });
+                                if ANY {
+                                    return best;
+                                }
                             }
                         }
                     }
@@ -148,6 +190,9 @@ impl Bvh {
         }
     }
 }
+
+/// Largest leaf whose primitives are tested in ray-entry order.
+const SORTED_LEAF: usize = 8;
 
 /// The slab test with the near and far plane of each axis chosen once per ray by the sign of
 /// the direction: three subtractions and multiplications per plane set, no min/max per axis.

@@ -109,12 +109,14 @@ impl<'a> SceneQueries<'a> {
     /// the last update) and passes the filter.
     #[inline]
     pub(crate) fn collider(&self, id: u32) -> Option<(ColliderHandle, &'a Collider)> {
-        let bp = self.broad_phase;
-        if bp.overlay.is_stale(id) {
+        if self.broad_phase.overlay.is_stale(id) {
             return None;
         }
-        let handle = bp.proxies.get(id as usize)?.as_ref()?.handle;
-        let collider = self.colliders.get(handle)?;
+        // Proxy ids are collider indices. Reading the collider by index alone (as Rapier's
+        // pipeline does) saves a read of the proxy per candidate; a collider that replaced a
+        // removed one under the same index since the last update is a current collider, and
+        // `refresh_queries` marks such proxies stale anyway.
+        let (collider, handle) = self.colliders.get_unknown_gen(id)?;
         (collider.is_enabled() && self.filter.test(self.bodies, handle, collider))
             .then_some((handle, collider))
     }
@@ -135,6 +137,22 @@ impl<'a> SceneQueries<'a> {
                 let aabb = Aabb::new(aabb.mins, aabb.maxs);
                 aabb.is_valid().then_some((handle, collider, aabb))
             })
+    }
+
+    /// The collision box of proxy `id` at the last update (Rapier's box with prediction
+    /// distance and soft-CCD motion, inside the fat box): a cheap first test before the
+    /// collider is read. Current for every proxy the overlay does not mark stale.
+    #[inline]
+    pub(crate) fn tight(&self, id: u32) -> &'a Aabb {
+        &self.broad_phase.tights[id as usize]
+    }
+
+    /// Whether the proxies of tree `m` have fat boxes larger than their collision boxes (all
+    /// but the fixed tree with the default zero `fixed_margin`): only then is the collision
+    /// box worth testing before the collider.
+    #[inline]
+    pub(crate) fn loose(&self, m: Mobility) -> bool {
+        m != Mobility::Fixed || self.broad_phase.config().fixed_margin > 0.0
     }
 
     /// Calls `f` with every proxy whose fat box overlaps `aabb`, over the three trees.

@@ -1,7 +1,7 @@
 //! Edits made outside a step, for the scene queries: [`CanopyBroadPhase::refresh_queries`]
 //! compares every collider with its proxy and records, until the next update, the proxies
-//! that no longer stand for their collider (removed, disabled, moved out of the fat box, a
-//! reused handle) and the colliders the trees do not cover (new, or moved out). Queries skip
+//! that no longer stand for their collider (removed, disabled, moved out of the collision box
+//! of the last update, a reused handle) and the colliders the trees do not cover (new, or moved out). Queries skip
 //! the former and test the latter directly. The pair-tracking state is not touched: the next
 //! update sees the same edits through Rapier's modified list and clears the overlay.
 
@@ -23,7 +23,7 @@ pub(crate) struct QueryOverlay {
 impl QueryOverlay {
     #[inline]
     pub fn is_stale(&self, id: u32) -> bool {
-        self.stale.get(id as usize).copied().unwrap_or(false)
+        !self.stale_ids.is_empty() && self.stale.get(id as usize).copied().unwrap_or(false)
     }
 
     pub fn extra(&self) -> &[ColliderHandle] {
@@ -100,8 +100,14 @@ impl CanopyBroadPhase {
             }
             let aabb = collider.compute_aabb();
             let aabb = Aabb::new(aabb.mins, aabb.maxs);
-            let covered =
-                proxy.is_some_and(|p| p.handle == handle && p.is_valid() && p.fat.contains(&aabb));
+            // The queries cull with the fat box, then test the collision box of the last update
+            // before the shape: both must still hold the collider.
+            let covered = proxy.is_some_and(|p| {
+                p.handle == handle
+                    && p.is_valid()
+                    && p.fat.contains(&aabb)
+                    && self.tights[id as usize].contains(&aabb)
+            });
             if !covered {
                 if proxy.is_some() {
                     self.overlay.mark_stale(id);

@@ -118,7 +118,20 @@ impl CanopyBroadPhase {
         colliders: &'a ColliderSet,
         filter: QueryFilter<'a>,
     ) -> QueryPipeline<'a> {
-        self.sync_mirror(colliders);
+        self.sync_query_pipeline(colliders);
+        self.query_pipeline(dispatcher, bodies, colliders, filter)
+    }
+
+    /// Rapier's `QueryPipeline` over the parry BVH as [`Self::sync_query_pipeline`] last left
+    /// it, through a shared borrow (so that it can be used beside [`Self::scene_queries`]).
+    /// [`Self::as_query_pipeline`] is the two in one.
+    pub fn query_pipeline<'a>(
+        &'a self,
+        dispatcher: &'a dyn QueryDispatcher,
+        bodies: &'a RigidBodySet,
+        colliders: &'a ColliderSet,
+        filter: QueryFilter<'a>,
+    ) -> QueryPipeline<'a> {
         QueryPipeline {
             dispatcher,
             bvh: &self.mirror.bvh,
@@ -128,7 +141,10 @@ impl CanopyBroadPhase {
         }
     }
 
-    fn sync_mirror(&mut self, colliders: &ColliderSet) {
+    /// Brings the parry BVH behind [`Self::query_pipeline`] in sync with the broadphase (and
+    /// the edits [`Self::refresh_queries`] recorded): built on the first call, then updated
+    /// where proxies changed since the previous call.
+    pub fn sync_query_pipeline(&mut self, colliders: &ColliderSet) {
         let extra: FxHashMap<u32, ColliderHandle> = self
             .overlay
             .extra()

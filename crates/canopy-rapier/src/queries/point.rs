@@ -30,7 +30,10 @@ impl<'a> SceneQueries<'a> {
         };
         for m in Mobility::ALL {
             let mut found: Option<(ColliderHandle, Real, PointProjection)> = None;
-            bp.trees[m as usize].nearest(&bp.proxies, point, best_d, |id, _| {
+            bp.trees[m as usize].nearest(&bp.proxies, point, best_d, |id, limit| {
+                if self.tight(id).distance_to_point(point) > limit {
+                    return None;
+                }
                 let (handle, collider) = self.collider(id)?;
                 let (d, proj) = exact(collider);
                 if found.as_ref().is_none_or(|f| d < f.1) {
@@ -72,6 +75,9 @@ impl<'a> SceneQueries<'a> {
             |collider: &Collider| collider.shape().contains_point(collider.position(), &point);
         for m in Mobility::ALL {
             bp.trees[m as usize].for_each_containing_point(&bp.proxies, &point, |id| {
+                if !self.tight(id).contains_point(&point) {
+                    return;
+                }
                 if let Some((handle, collider)) = self.collider(id) {
                     if contains(collider) {
                         found.push((handle, collider));

@@ -56,13 +56,9 @@ impl<'a> SceneQueries<'a> {
             let grown = Aabb::new(b.min - half, b.max + half);
             ray.intersect_aabb(&grown, max_toi)
         };
-        let bp = self.broad_phase;
         let mut candidates: Vec<(Real, ColliderHandle, &'a Collider)> = Vec::new();
         self.cull_aabb(&swept, |id| {
-            let Some(p) = bp.proxies[id as usize].as_ref() else {
-                return;
-            };
-            if let Some(t) = entry(&p.fat) {
+            if let Some(t) = entry(self.tight(id)) {
                 if let Some((handle, collider)) = self.collider(id) {
                     candidates.push((t, handle, collider));
                 }
@@ -120,6 +116,9 @@ impl<'a> SceneQueries<'a> {
             dispatcher.intersection_test(&pos12, shape, collider.shape()) == Ok(true)
         };
         self.cull_aabb(&aabb, |id| {
+            if !self.tight(id).intersects(&aabb) {
+                return;
+            }
             if let Some((handle, collider)) = self.collider(id) {
                 if intersects(collider) {
                     found.push((handle, collider));
@@ -135,10 +134,10 @@ impl<'a> SceneQueries<'a> {
     }
 
     /// Every collider whose broadphase box intersects `aabb`, as Rapier's
-    /// `QueryPipeline::intersect_aabb_conservative`: the boxes are those stored at the last
-    /// update (fat boxes: the collider's box with prediction distance and soft-CCD motion, grown
-    /// by the margin and stretched along its velocity), so the result holds every collider whose
-    /// current box meets `aabb`, and possibly a few more, and no shape test is made. Colliders
+    /// `QueryPipeline::intersect_aabb_conservative`: the boxes are those of the last update
+    /// (the collider's box with prediction distance and soft-CCD motion, as Rapier stores
+    /// them), so the result holds every collider whose current box meets `aabb`, and possibly
+    /// a few more, and no shape test is made. Colliders
     /// edited since the last update count with their current box.
     pub fn intersect_aabb_conservative(
         &self,
@@ -147,8 +146,10 @@ impl<'a> SceneQueries<'a> {
         let aabb = to_canopy(&aabb);
         let mut found = Vec::new();
         self.cull_aabb(&aabb, |id| {
-            if let Some(hit) = self.collider(id) {
-                found.push(hit);
+            if self.tight(id).intersects(&aabb) {
+                if let Some(hit) = self.collider(id) {
+                    found.push(hit);
+                }
             }
         });
         for (handle, collider, b) in self.edited() {
