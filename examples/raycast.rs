@@ -65,6 +65,9 @@ fn parse_args() -> Args {
 
 type Hit = Option<(ColliderHandle, Real)>;
 
+/// A timed variant: best time so far, hits of its last run, and the batch it casts.
+type Variant<'a> = (f64, Vec<Hit>, Box<dyn Fn() -> Vec<Hit> + 'a>);
+
 /// Rays whose hits differ (other time, beyond a tie at 1e-5, or hit vs miss).
 fn mismatches(a: &[Hit], b: &[Hit]) -> usize {
     a.iter()
@@ -133,7 +136,7 @@ fn main() {
             .cast_rays(&rays, max_toi, solid)
         })
     };
-    let mut variants: [(f64, Vec<Hit>, Box<dyn Fn() -> Vec<Hit>>); 5] = [
+    let mut variants: [Variant; 5] = [
         (
             f64::INFINITY,
             Vec::new(),
