@@ -1,5 +1,5 @@
 //! Ray-cast throughput on the standard scenes (full size) after one step, the same batch of
-//! rays (`canopy::scenes::ray_batch`: 10,000 rays, origins over the scene, random directions,
+//! rays (`canopy::scenes::ray_batch`: 100,000 rays, origins over the scene, random directions,
 //! unbounded, solid) for Rapier's `QueryPipeline` over its `BroadPhaseBvh` and for canopy's
 //! scene queries over `CanopyBroadPhase`, in the same run: one ray after the other on one
 //! thread for both, and canopy's batched `cast_rays` in a one-thread pool. Criterion reports
@@ -13,7 +13,7 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rapier3d::prelude::*;
 use std::time::Duration;
 
-const RAYS: usize = 10_000;
+const RAYS: usize = 100_000;
 
 fn bench_rays(c: &mut Criterion) {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -35,7 +35,7 @@ fn bench_rays(c: &mut Criterion) {
 
         let mut g = c.benchmark_group(format!("raycast/{name}"));
         g.throughput(Throughput::Elements(rays.len() as u64))
-            .sample_size(20)
+            .sample_size(10)
             .warm_up_time(Duration::from_secs(1))
             .measurement_time(Duration::from_secs(4));
         let q = rapier.broad_phase.as_query_pipeline(
