@@ -161,7 +161,11 @@ impl Bvh {
                 let (l, r) = (2 * w, 2 * w + 1);
                 match (tl, tr) {
                     (Some(a), Some(b)) => {
-                        let (near, far, tfar) = if a <= b { (l, r, b) } else { (r, l, a) };
+                        let (near, far, tfar, fnode) =
+                            if a <= b { (l, r, b, rn) } else { (r, l, a, ln) };
+                        // The near child's line is loaded next; start loading what the far
+                        // child will read when popped, so that both misses overlap.
+                        self.prefetch_child(fnode);
                         stack.push((far as u32, tfar));
                         cur = near;
                         continue;
@@ -189,6 +193,38 @@ impl Bvh {
             }
         }
     }
+}
+
+impl Bvh {
+    /// Starts loading the first line that visiting `child` (an entry of the wide array) reads:
+    /// its children's `Wide` for an interior node, its first primitive's index or box for a
+    /// leaf.
+    #[inline(always)]
+    fn prefetch_child(&self, child: &Node) {
+        let i = child.first as usize;
+        if !child.is_leaf() {
+            prefetch(self.wide.as_ptr().wrapping_add(i));
+        } else if child.count == 1 {
+            prefetch(self.prim_indices.as_ptr().wrapping_add(i));
+        } else {
+            prefetch(self.prim_bounds.as_ptr().wrapping_add(i));
+        }
+    }
+}
+
+/// A hint to load the cache line holding `p` into all cache levels; no effect on targets
+/// without a prefetch instruction in `core::arch` on stable Rust.
+#[inline(always)]
+fn prefetch<T>(p: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is only a hint: it never faults and never changes memory, whatever
+    // the address; SSE is part of the x86_64 baseline.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>(p.cast());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
 }
 
 /// Largest leaf whose primitives are tested in ray-entry order.
