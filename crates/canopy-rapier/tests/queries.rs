@@ -208,7 +208,7 @@ impl World {
                 &mut events,
             );
         } else {
-            self.canopy.refresh_queries(&self.bodies, &self.colliders);
+            self.canopy.refresh_queries(&self.colliders);
         }
     }
 

@@ -60,7 +60,7 @@ pub(crate) fn valid_pose(pose: &Isometry<Real>) -> bool {
 /// let wall = colliders.insert(ColliderBuilder::cuboid(0.5, 5.0, 5.0).translation(vector![10.0, 0.0, 0.0]));
 /// let mut broad_phase = CanopyBroadPhase::new();
 /// // Without a step in between, make the broadphase see the new collider.
-/// broad_phase.refresh_queries(&bodies, &colliders);
+/// broad_phase.refresh_queries(&colliders);
 /// let narrow_phase = NarrowPhase::new();
 /// let queries = broad_phase.scene_queries(narrow_phase.query_dispatcher(), &bodies, &colliders, QueryFilter::default());
 /// let ray = Ray::new(point![0.0, 0.0, 0.0], vector![1.0, 0.0, 0.0]);

@@ -7,7 +7,7 @@
 
 use crate::broad_phase::CanopyBroadPhase;
 use canopy_core::Aabb;
-use rapier3d::prelude::{ColliderHandle, ColliderSet, RigidBodySet};
+use rapier3d::prelude::{ColliderHandle, ColliderSet};
 
 /// What `refresh_queries` found; empty between an update and the next refresh.
 #[derive(Clone, Debug, Default)]
@@ -70,16 +70,16 @@ impl CanopyBroadPhase {
     /// let mut colliders = ColliderSet::new();
     /// let ball = colliders.insert(ColliderBuilder::ball(1.0));
     /// let mut broad_phase = CanopyBroadPhase::new();
-    /// broad_phase.refresh_queries(&bodies, &colliders);
+    /// broad_phase.refresh_queries(&colliders);
     /// // Teleport the ball, then query before any step.
     /// colliders[ball].set_translation(vector![50.0, 0.0, 0.0]);
-    /// broad_phase.refresh_queries(&bodies, &colliders);
+    /// broad_phase.refresh_queries(&colliders);
     /// let dispatcher = NarrowPhase::new();
     /// let queries = broad_phase.scene_queries(dispatcher.query_dispatcher(), &bodies, &colliders, QueryFilter::default());
     /// assert_eq!(queries.intersect_point(point![50.0, 0.5, 0.0]).count(), 1);
     /// assert_eq!(queries.intersect_point(point![0.0, 0.0, 0.0]).count(), 0);
     /// ```
-    pub fn refresh_queries(&mut self, _bodies: &RigidBodySet, colliders: &ColliderSet) {
+    pub fn refresh_queries(&mut self, colliders: &ColliderSet) {
         let affected = self.overlay.clear();
         self.mirror.touch_all(&affected);
         let mut seen = vec![false; self.proxies.len()];

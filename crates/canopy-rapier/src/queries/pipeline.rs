@@ -99,7 +99,7 @@ impl CanopyBroadPhase {
     /// let mut colliders = ColliderSet::new();
     /// colliders.insert(ColliderBuilder::cuboid(10.0, 0.1, 10.0));
     /// let mut broad_phase = CanopyBroadPhase::new();
-    /// broad_phase.refresh_queries(&bodies, &colliders);
+    /// broad_phase.refresh_queries(&colliders);
     /// let narrow_phase = NarrowPhase::new();
     /// let pipeline = broad_phase.as_query_pipeline(
     ///     narrow_phase.query_dispatcher(), &bodies, &colliders, QueryFilter::default());

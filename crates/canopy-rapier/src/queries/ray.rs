@@ -98,7 +98,7 @@ impl<'a> SceneQueries<'a> {
     /// let mut colliders = ColliderSet::new();
     /// let ball = colliders.insert(ColliderBuilder::ball(1.0));
     /// let mut broad_phase = CanopyBroadPhase::new();
-    /// broad_phase.refresh_queries(&bodies, &colliders);
+    /// broad_phase.refresh_queries(&colliders);
     /// let narrow_phase = NarrowPhase::new();
     /// let queries = broad_phase.scene_queries(
     ///     narrow_phase.query_dispatcher(), &bodies, &colliders, QueryFilter::default());
