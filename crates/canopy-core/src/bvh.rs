@@ -77,11 +77,11 @@ impl Node {
 }
 
 /// Both children of one interior node side by side in one 64-byte cache line, so that the pair
-/// walk and the ray traversal test both children of a node from one line. A child that is an
-/// interior node has `count == 0` and `first` = the index of *its* `Wide` (not a node index);
-/// a leaf child is the leaf node itself. `wide[0]` holds the root (twice); interior node `k` in
-/// depth-first order (root `k = 0`) has its children in `wide[k + 1]`. A child is addressed
-/// as `2 * wide index + side` (root: 0).
+/// walk tests both children of a node from one line (the ray casts walk a four-wide copy, in
+/// `query/ray.rs`). A child that is an interior node has `count == 0` and `first` = the index
+/// of *its* `Wide` (not a node index); a leaf child is the leaf node itself. `wide[0]` holds
+/// the root (twice); interior node `k` in depth-first order (root `k = 0`) has its children in
+/// `wide[k + 1]`. A child is addressed as `2 * wide index + side` (root: 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(64))]
 pub(crate) struct Wide(pub(crate) [Node; 2]);
@@ -187,9 +187,12 @@ pub struct Bvh {
     /// Inverse of `prim_indices`: the slot of each primitive. Empty after a build;
     /// `refit_primitives` makes it when first needed (most users never need it).
     pub(crate) slot_of: Vec<u32>,
-    /// Both children of each interior node in one cache line (see [`Wide`]), for the pair walk
-    /// and the ray casts; made with the tree and refit with it.
+    /// Both children of each interior node in one cache line (see [`Wide`]), for the pair walk;
+    /// made with the tree and refit with it.
     pub(crate) wide: Vec<Wide>,
+    /// The four-wide copy of the tree that the ray casts walk (see `query/ray.rs`): made by the
+    /// first ray cast after a build, refit with the tree once made.
+    pub(crate) ray4: std::sync::OnceLock<crate::query::ray::Ray4>,
 }
 
 impl Bvh {

@@ -112,5 +112,8 @@ impl Bvh {
             self.nodes[i].max = b.max;
         }
         crate::bvh::refresh_wide(&self.nodes, &mut self.wide);
+        if let Some(r4) = self.ray4.get_mut() {
+            r4.refresh(&self.nodes);
+        }
     }
 }

@@ -296,6 +296,7 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
         prim_bounds,
         slot_of: Vec::new(),
         wide,
+        ray4: Default::default(),
     }
 }
 

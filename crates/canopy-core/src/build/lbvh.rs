@@ -134,6 +134,7 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
         prim_bounds,
         slot_of: Vec::new(),
         wide,
+        ray4: Default::default(),
     })
 }
 

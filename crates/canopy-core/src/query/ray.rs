@@ -1,9 +1,12 @@
-//! Ray casts: closest hit and any hit. Nodes are tested with the slab test, near child first,
-//! and subtrees entered beyond the best time so far are skipped. The caller's callback decides
-//! the exact primitive test; the stored primitive boxes cull first.
+//! Ray casts: closest hit and any hit, on a four-wide copy of the tree (`Ray4`: the binary
+//! tree with every other level folded into its parent, so a ray meets half as many dependent
+//! cache misses on its way down). The four children of a node are slab-tested together and
+//! entered near first; subtrees entered beyond the best time so far are skipped. The caller's
+//! callback decides the exact primitive test; the stored primitive boxes cull first.
 
 use super::Stack;
-use crate::bvh::{wide_at, Bvh, Node};
+use crate::build::f4::F4;
+use crate::bvh::{Bvh, Node};
 use crate::ray::Ray;
 
 /// A ray hit: which primitive, at what time (`ray.origin + t * ray.dir`).
@@ -80,22 +83,84 @@ impl Bvh {
             return None;
         }
         ray.slab(&root.min, &root.max, t_max)?;
-        let slab = SignedSlab::new(ray);
-        let wide = &self.wide;
+        let r4 = self.ray4.get_or_init(|| Ray4::new(&self.nodes));
+        let slab = SignedSlab4::new(ray);
         let mut best: Option<RayHit> = None;
         let mut best_t = t_max;
-        let mut stack: Stack<(u32, f32)> = Stack::new();
-        // Current child reference (`2 * wide index + side`, see `Wide`): the root first.
-        let mut cur = 0usize;
-        loop {
-            let node = &wide_at(wide, cur >> 1).0[cur & 1];
-            if node.is_leaf() {
+        let mut stack: Stack<Entry> = Stack::new();
+        // What to visit next: the root node first.
+        let mut cur = Entry {
+            first: 0,
+            meta: INTERIOR,
+            t: 0.0,
+        };
+        'walk: loop {
+            if cur.meta == INTERIOR {
+                let n = r4.at(cur.first as usize);
+                let (entries, mut bits) = slab.entries(n, best_t);
+                if bits != 0 {
+                    // The hit children, nearest first (insertion sort of at most four).
+                    let mut hits = [cur; 4];
+                    let mut len = 0;
+                    while bits != 0 {
+                        let lane = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        let e = Entry {
+                            first: n.first[lane],
+                            meta: n.meta[lane],
+                            t: entries[lane],
+                        };
+                        let mut j = len;
+                        while j > 0 && hits[j - 1].t > e.t {
+                            hits[j] = hits[j - 1];
+                            j -= 1;
+                        }
+                        hits[j] = e;
+                        len += 1;
+                    }
+                    // The others go on the stack farthest first; start loading what they will
+                    // read while the nearest one is visited.
+                    for e in hits[1..len].iter().rev() {
+                        self.prefetch_entry(r4, e);
+                        stack.push(*e);
+                    }
+                    cur = hits[0];
+                    continue 'walk;
+                }
+            } else if cur.meta == 1 {
                 // A leaf of one primitive has that primitive's box (builders and refit make
                 // leaf boxes from their primitives), which the ray was just seen to enter
                 // before `best_t`: no second slab test.
-                let range = node.leaf_range();
-                if range.len() == 1 {
-                    let prim = self.prim_indices[range.start];
+                let prim = self.prim_indices[cur.first as usize];
+                if let Some(t) = hit(prim, best_t) {
+                    if t <= best_t && (best.is_none() || t < best_t) {
+                        best_t = t;
+                        best = Some(RayHit { primitive: prim, t });
+                        if ANY {
+                            return best;
+                        }
+                    }
+                }
+            } else {
+                // Primitives in the order the ray enters their boxes, so that the nearest hit
+                // comes first and the primitives behind it are skipped (the exact test is
+                // usually the expensive part). Leaves larger than `SORTED_LEAF` are taken in
+                // storage order.
+                let range = cur.first as usize..cur.first as usize + cur.meta as usize;
+                let mut order = [(0.0f32, 0u32); SORTED_LEAF];
+                let mut len = 0;
+                let sort = range.len() <= SORTED_LEAF;
+                for slot in range {
+                    let b = &self.prim_bounds[slot];
+                    let Some(entry) = ray.slab(&b.min, &b.max, best_t) else {
+                        continue;
+                    };
+                    if sort {
+                        order[len] = (entry, slot as u32);
+                        len += 1;
+                        continue;
+                    }
+                    let prim = self.prim_indices[slot];
                     if let Some(t) = hit(prim, best_t) {
                         if t <= best_t && (best.is_none() || t < best_t) {
                             best_t = t;
@@ -105,106 +170,48 @@ impl Bvh {
                             }
                         }
                     }
-                } else {
-                    // Primitives in the order the ray enters their boxes, so that the nearest
-                    // hit comes first and the primitives behind it are skipped (the exact test
-                    // is usually the expensive part). Leaves larger than `SORTED_LEAF` are
-                    // taken in storage order.
-                    let mut order = [(0.0f32, 0u32); SORTED_LEAF];
-                    let mut len = 0;
-                    let sort = range.len() <= SORTED_LEAF;
-                    for slot in range {
-                        let b = &self.prim_bounds[slot];
-                        let Some(entry) = ray.slab(&b.min, &b.max, best_t) else {
-                            continue;
-                        };
-                        if sort {
-                            order[len] = (entry, slot as u32);
-                            len += 1;
-                            continue;
-                        }
-                        let prim = self.prim_indices[slot];
-                        if let Some(t) = hit(prim, best_t) {
-                            if t <= best_t && (best.is_none() || t < best_t) {
-                                best_t = t;
-                                best = Some(RayHit { primitive: prim, t });
-                                if ANY {
-                                    return best;
-                                }
-                            }
-                        }
-                    }
-                    let order = &mut order[..len];
-                    order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                    for &(entry, slot) in order.iter() {
-                        if entry > best_t {
-                            break;
-                        }
-                        let prim = self.prim_indices[slot as usize];
-                        if let Some(t) = hit(prim, best_t) {
-                            if t <= best_t && (best.is_none() || t < best_t) {
-                                best_t = t;
-                                best = Some(RayHit { primitive: prim, t });
-                                if ANY {
-                                    return best;
-                                }
-                            }
-                        }
-                    }
                 }
-            } else {
-                // Both children from one cache line.
-                let w = node.first as usize;
-                let [ln, rn] = &wide_at(wide, w).0;
-                let tl = slab.entry(ln, best_t);
-                let tr = slab.entry(rn, best_t);
-                let (l, r) = (2 * w, 2 * w + 1);
-                match (tl, tr) {
-                    (Some(a), Some(b)) => {
-                        let (near, far, tfar, fnode) =
-                            if a <= b { (l, r, b, rn) } else { (r, l, a, ln) };
-                        // The near child's line is loaded next; start loading what the far
-                        // child will read when popped, so that both misses overlap.
-                        self.prefetch_child(fnode);
-                        stack.push((far as u32, tfar));
-                        cur = near;
-                        continue;
+                let order = &mut order[..len];
+                order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                for &(entry, slot) in order.iter() {
+                    if entry > best_t {
+                        break;
                     }
-                    (Some(_), None) => {
-                        cur = l;
-                        continue;
+                    let prim = self.prim_indices[slot as usize];
+                    if let Some(t) = hit(prim, best_t) {
+                        if t <= best_t && (best.is_none() || t < best_t) {
+                            best_t = t;
+                            best = Some(RayHit { primitive: prim, t });
+                            if ANY {
+                                return best;
+                            }
+                        }
                     }
-                    (None, Some(_)) => {
-                        cur = r;
-                        continue;
-                    }
-                    (None, None) => {}
                 }
             }
             // Next subtree still worth entering.
             loop {
-                let Some((i, t)) = stack.pop() else {
+                let Some(e) = stack.pop() else {
                     return best;
                 };
-                if t <= best_t {
-                    cur = i as usize;
-                    break;
+                if e.t <= best_t {
+                    cur = e;
+                    continue 'walk;
                 }
             }
         }
     }
-}
 
-impl Bvh {
-    /// Starts loading the first line that visiting `child` (an entry of the wide array) reads:
-    /// its children's `Wide` for an interior node, its first primitive's index or box for a
-    /// leaf.
+    /// Starts loading the first lines that visiting `e` reads: its [`Node4`] for an interior
+    /// node, its first primitive's index or box for a leaf.
     #[inline(always)]
-    fn prefetch_child(&self, child: &Node) {
-        let i = child.first as usize;
-        if !child.is_leaf() {
-            prefetch(self.wide.as_ptr().wrapping_add(i));
-        } else if child.count == 1 {
+    fn prefetch_entry(&self, r4: &Ray4, e: &Entry) {
+        let i = e.first as usize;
+        if e.meta == INTERIOR {
+            let p = r4.nodes.as_ptr().wrapping_add(i).cast::<u8>();
+            prefetch(p);
+            prefetch(p.wrapping_add(64));
+        } else if e.meta == 1 {
             prefetch(self.prim_indices.as_ptr().wrapping_add(i));
         } else {
             prefetch(self.prim_bounds.as_ptr().wrapping_add(i));
@@ -230,40 +237,291 @@ fn prefetch<T>(p: *const T) {
 /// Largest leaf whose primitives are tested in ray-entry order.
 const SORTED_LEAF: usize = 8;
 
-/// The slab test with the near and far plane of each axis chosen once per ray by the sign of
-/// the direction: three subtractions and multiplications per plane set, no min/max per axis.
-struct SignedSlab {
-    origin: [f32; 3],
-    inv: [f32; 3],
-    neg: [bool; 3],
+/// [`Node4::meta`] of an interior child.
+const INTERIOR: u32 = u32::MAX;
+
+/// A child to visit: `first` and `meta` as in [`Node4`], `t` the time the ray enters its box.
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    first: u32,
+    meta: u32,
+    t: f32,
 }
 
-impl SignedSlab {
-    #[inline(always)]
-    fn new(ray: &Ray) -> Self {
-        let inv = [ray.inv_dir.x, ray.inv_dir.y, ray.inv_dir.z];
-        Self {
-            origin: [ray.origin.x, ray.origin.y, ray.origin.z],
-            inv,
-            neg: inv.map(f32::is_sign_negative),
+/// Up to four children of one node, boxes stored by coordinate (lane `i` is child `i`), in two
+/// cache lines. `b[a]` holds the smallest and `b[3 + a]` the largest coordinate along axis
+/// `a`. A child is either
+///
+/// * interior: `meta == INTERIOR`, `first` the index of its own `Node4`;
+/// * a leaf: `meta` its number of primitives, `first` its first slot (as in [`Node`]);
+/// * empty (nodes with fewer than four children): an inverted box (`+inf` smallest, `-inf`
+///   largest corner), which no slab test enters, and `meta == 0`, a leaf of no primitive,
+///   should it ever be visited.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(128))]
+pub(crate) struct Node4 {
+    b: [[f32; 4]; 6],
+    first: [u32; 4],
+    meta: [u32; 4],
+}
+
+const _: () = assert!(std::mem::size_of::<Node4>() == 128);
+
+impl Node4 {
+    const EMPTY: Node4 = Node4 {
+        b: [
+            [f32::INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+        ],
+        first: [0; 4],
+        meta: [0; 4],
+    };
+
+    #[inline]
+    fn set_box(&mut self, lane: usize, n: &Node) {
+        for a in 0..3 {
+            self.b[a][lane] = n.min[a];
+            self.b[3 + a][lane] = n.max[a];
+        }
+    }
+}
+
+/// The four-wide tree of the ray casts, made from the binary one: each `Node4` takes the
+/// children of one binary interior node, then repeatedly replaces its interior child of largest
+/// surface area by that child's two children, up to four (a binary leaf root gives one node
+/// with that leaf as its only child). Node 0 is the root; the children of a node are stored
+/// next to each other. `src[k][lane]` is the binary node whose box lane `lane` of node `k`
+/// copies (`u32::MAX` for an empty lane), for refit.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Ray4 {
+    nodes: Vec<Node4>,
+    src: Vec<[u32; 4]>,
+}
+
+impl Ray4 {
+    /// The four-wide tree of the depth-first binary `nodes` (not empty).
+    pub(crate) fn new(nodes: &[Node]) -> Self {
+        let mut r4 = Ray4 {
+            nodes: Vec::with_capacity(nodes.len() / 3 + 1),
+            src: Vec::with_capacity(nodes.len() / 3 + 1),
+        };
+        if nodes.is_empty() {
+            return r4;
+        }
+        let half_area = |n: &Node| {
+            let e = [0, 1, 2].map(|a| n.max[a] - n.min[a]);
+            e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+        };
+        // (binary node, its Node4): binary interior nodes whose Node4 is still to fill.
+        let mut todo: Vec<(u32, u32)> = Vec::new();
+        r4.nodes.push(Node4::EMPTY);
+        r4.src.push([u32::MAX; 4]);
+        if nodes[0].is_leaf() {
+            let (n, s) = (&mut r4.nodes[0], &mut r4.src[0]);
+            n.set_box(0, &nodes[0]);
+            n.first[0] = nodes[0].first;
+            n.meta[0] = nodes[0].count;
+            s[0] = 0;
+            return r4;
+        }
+        todo.push((0, 0));
+        while let Some((bin, k)) = todo.pop() {
+            let b = &nodes[bin as usize];
+            let mut kids = [bin + 1, b.right(), 0, 0];
+            let mut len = 2;
+            while len < 4 {
+                // The interior child of largest area, opened in place (keeps the order).
+                let mut pick = None;
+                let mut area = f32::NEG_INFINITY;
+                for (j, &c) in kids[..len].iter().enumerate() {
+                    let cn = &nodes[c as usize];
+                    if !cn.is_leaf() && half_area(cn) > area {
+                        area = half_area(cn);
+                        pick = Some(j);
+                    }
+                }
+                let Some(j) = pick else { break };
+                let c = kids[j];
+                kids.copy_within(j + 1..len, j + 2);
+                kids[j] = c + 1;
+                kids[j + 1] = nodes[c as usize].right();
+                len += 1;
+            }
+            // The interior children's Node4s, side by side.
+            let base = r4.nodes.len() as u32;
+            let mut next = base;
+            let mut n4 = Node4::EMPTY;
+            let mut src = [u32::MAX; 4];
+            for (lane, &c) in kids[..len].iter().enumerate() {
+                let cn = &nodes[c as usize];
+                n4.set_box(lane, cn);
+                src[lane] = c;
+                if cn.is_leaf() {
+                    n4.first[lane] = cn.first;
+                    n4.meta[lane] = cn.count;
+                } else {
+                    n4.first[lane] = next;
+                    n4.meta[lane] = INTERIOR;
+                    next += 1;
+                }
+            }
+            r4.nodes[k as usize] = n4;
+            r4.src[k as usize] = src;
+            r4.nodes
+                .resize((next - base) as usize + r4.nodes.len(), Node4::EMPTY);
+            r4.src
+                .resize((next - base) as usize + r4.src.len(), [u32::MAX; 4]);
+            // Depth first, first child first: push in reverse.
+            for lane in (0..len).rev() {
+                if n4.meta[lane] == INTERIOR {
+                    todo.push((src[lane], n4.first[lane]));
+                }
+            }
+        }
+        r4
+    }
+
+    /// Copies the boxes of the binary `nodes` (same topology as when made) into the lanes.
+    pub(crate) fn refresh(&mut self, nodes: &[Node]) {
+        for (n4, src) in self.nodes.iter_mut().zip(&self.src) {
+            for (lane, &s) in src.iter().enumerate() {
+                if s != u32::MAX {
+                    n4.set_box(lane, &nodes[s as usize]);
+                }
+            }
         }
     }
 
-    /// Entry time into the node's box within `[0, t_max]`, or `None`. Same result as
-    /// `Ray::slab` (a NaN plane time, from `0 * inf`, is dropped by `f32::max`/`min`).
+    /// Node `i` without a bounds check, for the traversal loop.
+    ///
+    /// Every interior reference in a `Node4` is made by [`Ray4::new`] and indexes `nodes`; the
+    /// traversal only follows such references or starts at the root, 0, of a tree made from a
+    /// non-empty binary tree (which always has one node).
     #[inline(always)]
-    fn entry(&self, n: &Node, t_max: f32) -> Option<f32> {
-        let mut t0 = 0.0f32;
-        let mut t1 = t_max;
-        for i in 0..3 {
-            let (near, far) = if self.neg[i] {
-                (n.max[i], n.min[i])
-            } else {
-                (n.min[i], n.max[i])
-            };
-            t0 = t0.max((near - self.origin[i]) * self.inv[i]);
-            t1 = t1.min((far - self.origin[i]) * self.inv[i]);
+    fn at(&self, i: usize) -> &Node4 {
+        debug_assert!(i < self.nodes.len());
+        // SAFETY: see above.
+        unsafe { self.nodes.get_unchecked(i) }
+    }
+}
+
+/// The slab test of four boxes at once, with the near and far plane of each axis chosen once
+/// per ray by the sign of the direction.
+struct SignedSlab4 {
+    origin: [F4; 3],
+    inv: [F4; 3],
+    near: [usize; 3],
+    far: [usize; 3],
+}
+
+impl SignedSlab4 {
+    #[inline(always)]
+    fn new(ray: &Ray) -> Self {
+        let inv = [ray.inv_dir.x, ray.inv_dir.y, ray.inv_dir.z];
+        let neg = inv.map(f32::is_sign_negative);
+        Self {
+            origin: [ray.origin.x, ray.origin.y, ray.origin.z].map(F4::splat),
+            inv: inv.map(F4::splat),
+            near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
+            far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
         }
-        (t0 <= t1).then_some(t0)
+    }
+
+    /// Entry times of the ray into the four boxes of `n` within `[0, t_max]`, and the bit mask
+    /// of the boxes it enters. Same result per box as `Ray::slab`: a NaN plane time (from
+    /// `0 * inf`) is dropped, since it is always the first operand of the SSE-rule min/max.
+    #[inline(always)]
+    fn entries(&self, n: &Node4, t_max: f32) -> ([f32; 4], u32) {
+        let mut t0 = F4::splat(0.0);
+        let mut t1 = F4::splat(t_max);
+        for a in 0..3 {
+            let near = F4::load4(&n.b[self.near[a]]);
+            let far = F4::load4(&n.b[self.far[a]]);
+            t0 = near.sub(self.origin[a]).mul(self.inv[a]).max(t0);
+            t1 = far.sub(self.origin[a]).mul(self.inv[a]).min(t1);
+        }
+        (t0.to_array(), t0.le_bits(t1))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::{Aabb, BuildOptions, Builder, Bvh, Ray};
+    use nalgebra::{Point3, Vector3};
+
+    /// A small deterministic generator (SplitMix64), uniform in `[lo, hi)`.
+    fn rng(seed: u64) -> impl FnMut(f32, f32) -> f32 {
+        let mut s = seed;
+        move |lo, hi| {
+            s = s.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = s;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            lo + (hi - lo) * ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
+    fn boxes(n: usize, r: &mut impl FnMut(f32, f32) -> f32) -> Vec<Aabb> {
+        (0..n)
+            .map(|_| {
+                let c = Point3::new(r(0.0, 10.0), r(0.0, 10.0), r(0.0, 10.0));
+                let h = Vector3::new(r(0.05, 1.0), r(0.05, 1.0), r(0.05, 1.0));
+                Aabb::from_center_half_extents(c, h)
+            })
+            .collect()
+    }
+
+    /// Closest and any hit against brute force, for rays from around the scene.
+    fn check(bvh: &Bvh, boxes: &[Aabb], r: &mut impl FnMut(f32, f32) -> f32) {
+        for _ in 0..200 {
+            let o = Point3::new(r(-2.0, 12.0), r(-2.0, 12.0), r(-2.0, 12.0));
+            let d = Vector3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0));
+            let ray = Ray::new(o, d);
+            let t_max = r(0.0, 30.0);
+            let test = |i: u32, t: f32| ray.intersect_aabb(&boxes[i as usize], t);
+            let brute = (0..boxes.len() as u32)
+                .filter_map(|i| test(i, t_max))
+                .min_by(f32::total_cmp);
+            let got = bvh.cast_ray(&ray, t_max, test);
+            assert_eq!(got.map(|h| h.t), brute);
+            if let Some(h) = got {
+                assert_eq!(test(h.primitive, t_max), Some(h.t));
+            }
+            assert_eq!(
+                bvh.cast_ray_any(&ray, t_max, test).is_some(),
+                brute.is_some()
+            );
+        }
+    }
+
+    #[test]
+    fn four_wide_tree_is_exact_and_follows_refits() {
+        let mut r = rng(7);
+        for builder in [Builder::BinnedSah, Builder::Lbvh] {
+            for leaf in [1, 4] {
+                for n in [1, 3, 5, 200] {
+                    let options = BuildOptions {
+                        builder,
+                        max_leaf_size: leaf,
+                        ..Default::default()
+                    };
+                    let mut b = boxes(n, &mut r);
+                    let mut bvh = Bvh::build(&b, options).unwrap();
+                    check(&bvh, &b, &mut r);
+                    b = boxes(n, &mut r);
+                    bvh.refit(&b).unwrap();
+                    check(&bvh, &b, &mut r);
+                    b[n / 2] = Aabb::from_arrays([20.0; 3], [21.0; 3]);
+                    bvh.refit_primitives(&[(n as u32 / 2, b[n / 2])]).unwrap();
+                    check(&bvh, &b, &mut r);
+                    // A clone keeps its own copy.
+                    check(&bvh.clone(), &b, &mut r);
+                }
+            }
+        }
     }
 }
