@@ -5,14 +5,16 @@
 //! bins its references' centroids along the widest axis of its box (the next one when that gives
 //! no split) in one pass, sweeps the bins for the cheapest split, and partitions its references
 //! out of place into the other buffer without branches; its children's boxes come from the
-//! bins, and the children then work the other way round. A node of at most [`SMALL`]
-//! references tries every partition into two sets instead (exact SAH). A node becomes a leaf
+//! bins, and the children then work the other way round. A node of at most [`SWEEP`]
+//! references sorts them by centroid along the widest axis and tries every split of that order
+//! instead (a sweep: cheaper than binning there, and exact along that axis); one of at most
+//! [`SMALL`] tries every partition into two sets (exact SAH). A node becomes a leaf
 //! when no split beats `intersection_cost * n` and the leaf-size limit allows, and writes its
 //! references straight into the tree's primitive arrays.
 //!
 //! Binning one axis over the node's box (rather than three over the centroids' box) and the
-//! exact small nodes keep the trees within about a percent of a three-axis binned build, at a
-//! fraction of the cost. Areas are computed in `f32`, scaled by the root's extent so that
+//! exact small nodes and sweeps keep the trees within about a percent of a three-axis binned
+//! build, at a fraction of the cost. Areas are computed in `f32`, scaled by the root's extent so that
 //! nothing overflows.
 //!
 //! The two halves of large nodes are built with `rayon::join` on disjoint halves of every
@@ -33,7 +35,10 @@ const MAX_BINS: usize = 32;
 /// Nodes with at least this many primitives bin into two sets of bins.
 const TWO_BIN_SETS: usize = 64;
 /// Nodes of at most this many primitives try every partition into two sets (at most 15).
-const SMALL: usize = 5;
+const SMALL: usize = 3;
+/// Nodes of at most this many primitives (and more than [`SMALL`]) sort their centroids along
+/// the widest axis and try every split of that order (a full sweep instead of bins).
+const SWEEP: usize = 16;
 
 /// A primitive reference: lanes 0..3 of `min`/`max` hold the box, `min[3]` the primitive
 /// index's bits, `max[3]` zero.
@@ -315,6 +320,9 @@ fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     }
     if n <= SMALL {
         return small_node(t, b, out, ctx);
+    }
+    if n <= SWEEP {
+        return sweep_node(t, b, out, ctx);
     }
     match find_split(t.src, &b, ctx) {
         Some(s) => {
@@ -627,6 +635,76 @@ fn enumerate_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     }
     let (lt, rt) = t.split(left, true);
     join(b, (lt, sub[m]), (rt, sub[full ^ m]), out, ctx);
+}
+
+/// A node of `SMALL + 1..=SWEEP` references: sorts them by centroid along the widest axis of
+/// `b` and takes the cheapest split of that order (exact SAH along one axis).
+fn sweep_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
+    let n = t.src.len();
+    debug_assert!((SMALL + 1..=SWEEP).contains(&n));
+    let axis = widest_axis(&b);
+    // Centroid keys (halved so that nothing overflows), sorted by insertion; stable.
+    let mut key = [0.0f32; SWEEP];
+    let mut ord = [0u8; SWEEP];
+    for (i, r) in t.src.iter().enumerate() {
+        let k = r.min[axis] * 0.5 + r.max[axis] * 0.5;
+        let mut j = i;
+        while j > 0 && key[j - 1] > k {
+            key[j] = key[j - 1];
+            ord[j] = ord[j - 1];
+            j -= 1;
+        }
+        key[j] = k;
+        ord[j] = i as u8;
+    }
+    let refs = &t.src[..n];
+    let at = |i: usize| &refs[ord[i] as usize];
+    // right_*[i]: references ord[i..n].
+    let mut right_box = [Box4::empty(); SWEEP];
+    let mut right_area = [0.0f32; SWEEP];
+    let mut acc = Box4::empty();
+    for i in (1..n).rev() {
+        let r = at(i);
+        acc.grow(r.lo(), r.hi());
+        right_box[i] = acc;
+        right_area[i] = ctx.area.of_box(&acc);
+    }
+    let mut acc = Box4::empty();
+    let (mut best_cost, mut best) = (f32::INFINITY, 1usize);
+    let mut left = acc;
+    for i in 0..n - 1 {
+        let r = at(i);
+        acc.grow(r.lo(), r.hi());
+        let cost = ctx.area.of_box(&acc) * (i + 1) as f32 + right_area[i + 1] * (n - 1 - i) as f32;
+        if cost < best_cost {
+            best_cost = cost;
+            best = i + 1;
+            left = acc;
+        }
+    }
+    if ctx.prefers_leaf(n, ctx.area.of_box(&b), best_cost) {
+        return t.leaf(&b, out);
+    }
+    for (d, &o) in t.dst.iter_mut().zip(&ord[..n]) {
+        *d = refs[o as usize];
+    }
+    let right = right_box[best];
+    let (lt, rt) = t.split(best, true);
+    join(b, (lt, left), (rt, right), out, ctx);
+}
+
+/// The axis of the largest extent of `b` (the first of equals).
+#[inline(always)]
+fn widest_axis(b: &Box4) -> usize {
+    let e = b.hi.sub(b.lo).to_array();
+    let mut a = 0;
+    if e[1] > e[a] {
+        a = 1;
+    }
+    if e[2] > e[a] {
+        a = 2;
+    }
+    a
 }
 
 /// Splits at the object median along the widest axis of the bounds `b` (or at the middle
