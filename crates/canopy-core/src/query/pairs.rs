@@ -462,6 +462,126 @@ fn wwalk<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, f: &mut impl FnMut(u
     }
 }
 
+/// `true` when the boxes of two nodes (or wide entries) overlap: one mask, one move.
+#[inline(always)]
+fn entries_overlap(a: &Node, b: &Node) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_and_ps, _mm_cmple_ps, _mm_movemask_ps};
+        let (alo, ahi) = node_box(a);
+        let (blo, bhi) = node_box(b);
+        // SAFETY: SSE is part of the x86_64 baseline.
+        unsafe {
+            _mm_movemask_ps(_mm_and_ps(
+                _mm_cmple_ps(alo.0, bhi.0),
+                _mm_cmple_ps(blo.0, ahi.0),
+            )) & 7
+                == 7
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        nodes_overlap(a, b)
+    }
+}
+
+/// A task of the self walk: two wide entries whose boxes overlap, or one entry twice (its
+/// subtree against itself).
+type EntryPair<'a> = (&'a Node, &'a Node);
+
+/// The stack of the self walk. Each expansion reserves room for all the tasks it may make,
+/// then writes every candidate and keeps it only when it is a task (`len += keep`), so the
+/// box tests feed no branch.
+struct PairStack<'a> {
+    v: Vec<EntryPair<'a>>,
+}
+
+impl<'a> PairStack<'a> {
+    /// Pushes the candidates `t[i]` for which `keep[i]`.
+    #[inline(always)]
+    fn push_if<const N: usize>(&mut self, t: [EntryPair<'a>; N], keep: [bool; N]) {
+        self.v.reserve(N);
+        let mut len = self.v.len();
+        let p = self.v.as_mut_ptr();
+        for i in 0..N {
+            // SAFETY: `reserve(N)` made room for `N` more tasks past the original length, and
+            // `len` grows by at most one per write; tasks are `Copy` (nothing to drop).
+            unsafe { p.add(len).write(t[i]) };
+            len += keep[i] as usize;
+        }
+        // SAFETY: the first `len` slots are initialised (see above) and within capacity.
+        unsafe { self.v.set_len(len) };
+    }
+}
+
+/// The unmarked self walk ([`Bvh::self_pairs`]) from wide entry `root` against itself: the
+/// tasks of [`wwalk`] for one tree, held as references to their two entries (nothing to look
+/// up on a pop), and pushed without branches (see [`PairStack`]). Two one-primitive leaves
+/// found overlapping are pushed like any task and reported when popped.
+fn self_walk<'a>(t: &'a Bvh, root: &'a Node, f: &mut impl FnMut(u32, u32)) {
+    let w = &t.wide[..];
+    let mut stack = PairStack {
+        v: Vec::with_capacity(256),
+    };
+    let mut qstack: Vec<u32> = Vec::with_capacity(64);
+    stack.v.push((root, root));
+    while let Some((a, b)) = stack.v.pop() {
+        if std::ptr::eq(a, b) {
+            if a.is_leaf() {
+                leaf_pairs::<true>(t, a, t, a, f);
+                continue;
+            }
+            let [l, r] = &wide_at(w, a.first as usize).0;
+            // A leaf of one primitive has no pairs of its own.
+            stack.push_if(
+                [(r, r), (l, l), (l, r)],
+                [r.count != 1, l.count != 1, entries_overlap(l, r)],
+            );
+            continue;
+        }
+        match (a.count, b.count) {
+            (0, 0) => {
+                let [a0, a1] = &wide_at(w, a.first as usize).0;
+                let [b0, b1] = &wide_at(w, b.first as usize).0;
+                stack.push_if(
+                    [(a1, b1), (a1, b0), (a0, b1), (a0, b0)],
+                    [
+                        entries_overlap(a1, b1),
+                        entries_overlap(a1, b0),
+                        entries_overlap(a0, b1),
+                        entries_overlap(a0, b0),
+                    ],
+                );
+            }
+            (1, 1) => {
+                // One-primitive leaves have their primitive's box, seen to overlap.
+                let (ip, iq) = (
+                    t.prim_indices[a.first as usize],
+                    t.prim_indices[b.first as usize],
+                );
+                report::<true, false>(ip, iq, f);
+            }
+            (1, 0) => wprim_query::<true, false>(t, a, t, b.first, &mut qstack, f),
+            (0, 1) => wprim_query::<true, false>(t, b, t, a.first, &mut qstack, f),
+            (_, 0) => {
+                let [b0, b1] = &wide_at(w, b.first as usize).0;
+                stack.push_if(
+                    [(a, b1), (a, b0)],
+                    [entries_overlap(a, b1), entries_overlap(a, b0)],
+                );
+            }
+            (0, _) => {
+                let [a0, a1] = &wide_at(w, a.first as usize).0;
+                stack.push_if(
+                    [(a1, b), (a0, b)],
+                    [entries_overlap(a1, b), entries_overlap(a0, b)],
+                );
+            }
+            _ => leaf_pairs::<true>(t, a, t, b, f),
+        }
+    }
+}
+
 /// Two overlapping entries found by the walk: reported at once when both are leaves of one
 /// primitive (whose boxes are those primitives' boxes), else pushed as a task.
 #[inline(always)]
@@ -639,8 +759,8 @@ impl Bvh {
     /// # Ok::<(), canopy_core::BvhError>(())
     /// ```
     pub fn self_pairs(&self, mut f: impl FnMut(u32, u32)) {
-        if !self.wide.is_empty() {
-            wwalk::<true>(self, self, (0, 0), &mut f);
+        if let Some(root) = self.wide.first() {
+            self_walk(self, &root.0[0], &mut f);
         }
     }
 
