@@ -37,7 +37,8 @@ pub struct BuildOptions {
     /// leaves average about 1.1 primitives), so for it this is an upper bound.
     pub max_leaf_size: u32,
     /// Number of SAH bins per axis, `2..=32` (SAH builder only). Default: 16, where Wald found
-    /// quality to level off.
+    /// quality to level off. Nodes of at most 16 primitives are not binned: they are split
+    /// exactly, by a sweep over their sorted centroids (or by trying every subset up to 3).
     pub bins: u32,
     /// Use rayon for the top levels of the build (the current rayon pool). The tree is the same
     /// either way. Default: `true`.
