@@ -8,6 +8,13 @@
 //! the root task breadth-first into a fixed number of independent tasks, run those on rayon, and
 //! concatenate the results in task order.
 //!
+//! The serial unmarked walks and the parallel self query run on the tree's wide array (both
+//! children of a node in one cache line); the others on the nodes. The plain self queries
+//! (serial and parallel) have a walk of their own: tasks are pairs of references to wide
+//! entries, pushed without branches (every candidate is written, the stack length grows by the
+//! box test's result), and the children line of a right child is prefetched as its tasks are
+//! pushed.
+//!
 //! The `_marked` variants report only pairs with at least one *marked* primitive (a broadphase
 //! marks the proxies that moved). [`PairMarks`] summarises the marks per node, so whole
 //! subtrees without a marked primitive are skipped: one pass finds every new pair of every
@@ -531,17 +538,17 @@ impl<'a> PairStack<'a> {
     }
 }
 
-/// The unmarked self walk ([`Bvh::self_pairs`]) from wide entry `root` against itself: the
-/// tasks of [`wwalk`] for one tree, held as references to their two entries (nothing to look
+/// The unmarked self walk ([`Bvh::self_pairs`]) from task `start` (`(root, root)` for the
+/// whole tree; see [`EntryPair`]): the tasks of [`wwalk`] for one tree, held as references to their two entries (nothing to look
 /// up on a pop), and pushed without branches (see [`PairStack`]). Two one-primitive leaves
 /// found overlapping are pushed like any task and reported when popped.
-fn self_walk<'a>(t: &'a Bvh, root: &'a Node, f: &mut impl FnMut(u32, u32)) {
+fn self_walk<'a>(t: &'a Bvh, start: EntryPair<'a>, f: &mut impl FnMut(u32, u32)) {
     let w = &t.wide[..];
     let mut stack = PairStack {
         v: Vec::with_capacity(256),
     };
     let mut qstack: Vec<u32> = Vec::with_capacity(64);
-    stack.v.push((root, root));
+    stack.v.push(start);
     while let Some((a, b)) = stack.v.pop() {
         if std::ptr::eq(a, b) {
             if a.is_leaf() {
@@ -701,6 +708,104 @@ fn wprim_query<const SELF: bool, const SWAP: bool>(
     }
 }
 
+/// The tasks of the self walk of `t` (not empty) expanded breadth first from the root until
+/// there are at least `target` (fewer when the tree runs out of nodes): each task is expanded
+/// as [`self_walk`] would, except that a one-primitive leaf against a subtree splits the
+/// subtree like any other leaf (the same pairs). Depends only on the tree.
+fn split_self_tasks(t: &Bvh, target: usize) -> Vec<EntryPair<'_>> {
+    let w = &t.wide[..];
+    let root = &w[0].0[0];
+    let mut tasks = vec![(root, root)];
+    while tasks.len() < target {
+        let mut next = Vec::with_capacity(tasks.len() * 4);
+        let mut grew = false;
+        for &(a, b) in &tasks {
+            if std::ptr::eq(a, b) {
+                if a.is_leaf() {
+                    next.push((a, b));
+                    continue;
+                }
+                let [l, r] = &wide_at(w, a.first as usize).0;
+                if r.count != 1 {
+                    next.push((r, r));
+                }
+                if l.count != 1 {
+                    next.push((l, l));
+                }
+                if entries_overlap(l, r) {
+                    next.push((l, r));
+                }
+                grew = true;
+                continue;
+            }
+            match (a.is_leaf(), b.is_leaf()) {
+                (true, true) => next.push((a, b)),
+                (false, false) => {
+                    let [a0, a1] = &wide_at(w, a.first as usize).0;
+                    let [b0, b1] = &wide_at(w, b.first as usize).0;
+                    for (x, y) in [(a1, b1), (a1, b0), (a0, b1), (a0, b0)] {
+                        if entries_overlap(x, y) {
+                            next.push((x, y));
+                        }
+                    }
+                    grew = true;
+                }
+                (true, false) => {
+                    let [b0, b1] = &wide_at(w, b.first as usize).0;
+                    for y in [b1, b0] {
+                        if entries_overlap(a, y) {
+                            next.push((a, y));
+                        }
+                    }
+                    grew = true;
+                }
+                (false, true) => {
+                    let [a0, a1] = &wide_at(w, a.first as usize).0;
+                    for x in [a1, a0] {
+                        if entries_overlap(x, b) {
+                            next.push((x, b));
+                        }
+                    }
+                    grew = true;
+                }
+            }
+        }
+        tasks = next;
+        if !grew {
+            break;
+        }
+    }
+    tasks
+}
+
+/// [`Bvh::par_self_pairs`] of a non-empty tree: the tasks of [`split_self_tasks`], each walked
+/// by [`self_walk`] (on rayon when the pool has more than one thread), results concatenated in
+/// task order.
+fn par_self_walk(t: &Bvh) -> Vec<(u32, u32)> {
+    let tasks = split_self_tasks(t, PARALLEL_TASKS);
+    if rayon::current_num_threads() == 1 {
+        // Same tasks in the same order, without the cost of rayon's collection.
+        let mut out = Vec::with_capacity(t.len());
+        for &task in &tasks {
+            self_walk(t, task, &mut |a, b| out.push((a, b)));
+        }
+        return out;
+    }
+    let parts: Vec<Vec<(u32, u32)>> = tasks
+        .par_iter()
+        .map(|&task| {
+            let mut v = Vec::new();
+            self_walk(t, task, &mut |a, b| v.push((a, b)));
+            v
+        })
+        .collect();
+    let mut out = Vec::with_capacity(parts.iter().map(Vec::len).sum());
+    for p in parts {
+        out.extend_from_slice(&p);
+    }
+    out
+}
+
 /// Breadth-first expansion of `start` into at least `target` tasks (fewer when the trees run
 /// out of nodes). Depends only on the trees.
 fn split_tasks<const SELF: bool, M1: Mask, M2: Mask>(
@@ -780,7 +885,7 @@ impl Bvh {
     /// ```
     pub fn self_pairs(&self, mut f: impl FnMut(u32, u32)) {
         if let Some(root) = self.wide.first() {
-            self_walk(self, &root.0[0], &mut f);
+            self_walk(self, (&root.0[0], &root.0[0]), &mut f);
         }
     }
 
@@ -802,10 +907,10 @@ impl Bvh {
     /// # Ok::<(), canopy_core::BvhError>(())
     /// ```
     pub fn par_self_pairs(&self) -> Vec<(u32, u32)> {
-        if self.nodes.is_empty() {
+        if self.wide.is_empty() {
             return Vec::new();
         }
-        par_walk::<true, All, All>(self, &All, self, &All, (0, 0))
+        par_self_walk(self)
     }
 
     /// Calls `f(a, b)` for every primitive `a` of `self` and `b` of `other` whose boxes
@@ -901,7 +1006,8 @@ impl Bvh {
         match self.checked_marks(marks) {
             Some(m) if m.any => walk::<true, _, _>(self, m, self, m, (0, 0), &mut f),
             Some(_) => {}
-            None => self.self_pairs(f),
+            // All marked: the walk (and order) of the plain query before it had its own.
+            None => wwalk::<true>(self, self, (0, 0), &mut f),
         }
     }
 
@@ -924,7 +1030,8 @@ impl Bvh {
         match self.checked_marks(marks) {
             Some(m) if m.any => par_walk::<true, _, _>(self, m, self, m, (0, 0)),
             Some(_) => Vec::new(),
-            None => self.par_self_pairs(),
+            // All marked: the walk (and order) of the plain query before it had its own.
+            None => par_walk::<true, All, All>(self, &All, self, &All, (0, 0)),
         }
     }
 
