@@ -101,33 +101,47 @@ pub(crate) fn wide_at(wide: &[Wide], i: usize) -> &Wide {
     unsafe { wide.get_unchecked(i) }
 }
 
-/// The wide array of the depth-first `nodes` (see [`Wide`]).
+/// The wide array of the depth-first `nodes` (see [`Wide`]), in one pass.
+///
+/// Every interior node has two children, so a subtree of `s` nodes holds `s / 2` interior
+/// nodes (`s` odd): interior node `i` of wide index `w` has its left child at `w + 1` and its
+/// right child `r` at `w + 1 + (r - i - 1) / 2`. Panics when `nodes` is not such a tree (a
+/// reference would leave the array).
 pub(crate) fn make_wide(nodes: &[Node]) -> Vec<Wide> {
-    if nodes.is_empty() {
+    let Some(root) = nodes.first() else {
         return Vec::new();
-    }
-    // Wide index of each interior node: 1 + its rank among interior nodes.
-    let mut rank = Vec::with_capacity(nodes.len());
-    let mut k = 1u32;
-    for n in nodes {
-        rank.push(k);
-        k += u32::from(!n.is_leaf());
-    }
-    let remap = |j: usize| {
-        let n = nodes[j];
-        if n.is_leaf() {
-            n
-        } else {
-            Node::interior(n.min, n.max, rank[j])
-        }
     };
-    let mut wide = Vec::with_capacity(k as usize);
-    wide.push(Wide([remap(0), remap(0)]));
+    let interior = (nodes.len() - 1) / 2;
+    // A child as the wide array stores it: an interior node refers to its `Wide`, `w`.
+    let child = |n: &Node, w: usize| Node {
+        first: if n.is_leaf() { n.first } else { w as u32 },
+        ..*n
+    };
+    let mut wide = Vec::with_capacity(interior + 1);
+    wide.push(Wide([child(root, 1); 2]));
+    // The largest reference made.
+    let mut top = 0usize;
     for (i, n) in nodes.iter().enumerate() {
-        if !n.is_leaf() {
-            wide.push(Wide([remap(i + 1), remap(n.right() as usize)]));
+        if n.is_leaf() {
+            continue;
         }
+        let w = wide.len();
+        let r = n.right() as usize;
+        let rw = w + 1 + r.saturating_sub(i + 1) / 2;
+        let (left, right) = (&nodes[i + 1], &nodes[r]);
+        wide.push(Wide([child(left, w + 1), child(right, rw)]));
+        let made = if right.is_leaf() { w + 1 } else { rw };
+        let made = if left.is_leaf() && right.is_leaf() {
+            0
+        } else {
+            made
+        };
+        top = top.max(made);
     }
+    assert!(
+        wide.len() == interior + 1 && top <= interior,
+        "make_wide: not a full binary tree in depth-first order"
+    );
     wide
 }
 
