@@ -83,7 +83,9 @@ impl Bvh {
             return None;
         }
         ray.slab(&root.min, &root.max, t_max)?;
-        let r4 = self.ray4.get_or_init(|| Ray4::new(&self.nodes));
+        let r4 = self
+            .ray4
+            .get_or_init(|| Ray4::new(&self.nodes, &self.prim_indices));
         let slab = SignedSlab4::new(ray);
         let mut best: Option<RayHit> = None;
         let mut best_t = t_max;
@@ -130,8 +132,9 @@ impl Bvh {
             } else if cur.meta == 1 {
                 // A leaf of one primitive has that primitive's box (builders and refit make
                 // leaf boxes from their primitives), which the ray was just seen to enter
-                // before `best_t`: no second slab test.
-                let prim = self.prim_indices[cur.first as usize];
+                // before `best_t`: no second slab test. Its lane holds the primitive index
+                // itself, so the callback comes without another dependent load.
+                let prim = cur.first;
                 if let Some(t) = hit(prim, best_t) {
                     if t <= best_t && (best.is_none() || t < best_t) {
                         best_t = t;
@@ -203,7 +206,8 @@ impl Bvh {
     }
 
     /// Starts loading the first lines that visiting `e` reads: its [`Node4`] for an interior
-    /// node, its first primitive's index or box for a leaf.
+    /// node, its first primitive's box for a leaf of several (a leaf of one reads nothing of
+    /// the tree).
     #[inline(always)]
     fn prefetch_entry(&self, r4: &Ray4, e: &Entry) {
         let i = e.first as usize;
@@ -211,9 +215,7 @@ impl Bvh {
             let p = r4.nodes.as_ptr().wrapping_add(i).cast::<u8>();
             prefetch(p);
             prefetch(p.wrapping_add(64));
-        } else if e.meta == 1 {
-            prefetch(self.prim_indices.as_ptr().wrapping_add(i));
-        } else {
+        } else if e.meta > 1 {
             prefetch(self.prim_bounds.as_ptr().wrapping_add(i));
         }
     }
@@ -253,7 +255,8 @@ struct Entry {
 /// `a`. A child is either
 ///
 /// * interior: `meta == INTERIOR`, `first` the index of its own `Node4`;
-/// * a leaf: `meta` its number of primitives, `first` its first slot (as in [`Node`]);
+/// * a leaf of one primitive: `meta == 1`, `first` that primitive's index (not its slot);
+/// * a larger leaf: `meta` its number of primitives, `first` its first slot (as in [`Node`]);
 /// * empty (nodes with fewer than four children): an inverted box (`+inf` smallest, `-inf`
 ///   largest corner), which no slab test enters, and `meta == 0`, a leaf of no primitive,
 ///   should it ever be visited.
@@ -281,6 +284,17 @@ impl Node4 {
         meta: [0; 4],
     };
 
+    /// Makes lane `lane` the leaf `n` (see [`Node4`]).
+    #[inline]
+    fn set_leaf(&mut self, lane: usize, n: &Node, prim_indices: &[u32]) {
+        self.first[lane] = if n.count == 1 {
+            prim_indices[n.first as usize]
+        } else {
+            n.first
+        };
+        self.meta[lane] = n.count;
+    }
+
     #[inline]
     fn set_box(&mut self, lane: usize, n: &Node) {
         for a in 0..3 {
@@ -294,7 +308,8 @@ impl Node4 {
 /// children of one binary interior node, then repeatedly replaces its interior child of largest
 /// surface area by that child's two children, up to four (a binary leaf root gives one node
 /// with that leaf as its only child). Node 0 is the root; the children of a node are stored
-/// next to each other. `src[k][lane]` is the binary node whose box lane `lane` of node `k`
+/// next to each other. A leaf lane of one primitive holds the primitive's index, which no refit
+/// changes. `src[k][lane]` is the binary node whose box lane `lane` of node `k`
 /// copies (`u32::MAX` for an empty lane), for refit.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Ray4 {
@@ -303,8 +318,9 @@ pub(crate) struct Ray4 {
 }
 
 impl Ray4 {
-    /// The four-wide tree of the depth-first binary `nodes` (not empty).
-    pub(crate) fn new(nodes: &[Node]) -> Self {
+    /// The four-wide tree of the depth-first binary `nodes` (not empty), whose leaves index
+    /// `prim_indices` (slot to primitive index).
+    pub(crate) fn new(nodes: &[Node], prim_indices: &[u32]) -> Self {
         let mut r4 = Ray4 {
             nodes: Vec::with_capacity(nodes.len() / 3 + 1),
             src: Vec::with_capacity(nodes.len() / 3 + 1),
@@ -323,8 +339,7 @@ impl Ray4 {
         if nodes[0].is_leaf() {
             let (n, s) = (&mut r4.nodes[0], &mut r4.src[0]);
             n.set_box(0, &nodes[0]);
-            n.first[0] = nodes[0].first;
-            n.meta[0] = nodes[0].count;
+            n.set_leaf(0, &nodes[0], prim_indices);
             s[0] = 0;
             return r4;
         }
@@ -361,8 +376,7 @@ impl Ray4 {
                 n4.set_box(lane, cn);
                 src[lane] = c;
                 if cn.is_leaf() {
-                    n4.first[lane] = cn.first;
-                    n4.meta[lane] = cn.count;
+                    n4.set_leaf(lane, cn, prim_indices);
                 } else {
                     n4.first[lane] = next;
                     n4.meta[lane] = INTERIOR;
