@@ -41,8 +41,7 @@ const SMALL: usize = 3;
 const SWEEP: usize = 16;
 
 /// A primitive reference: lanes 0..3 of `min`/`max` hold the box, `min[3]` the primitive
-/// index's bits, `max[3]` zero or the key of its last binning (a small finite float, see
-/// [`Binning::bin`]; nothing reads lane 3 of a box).
+/// index's bits, `max[3]` zero.
 #[derive(Clone, Copy)]
 #[repr(C, align(32))]
 struct PrimRef {
@@ -325,7 +324,7 @@ fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     if n <= SWEEP {
         return sweep_node(t, b, out, ctx);
     }
-    match find_split(&mut *t.src, &b, ctx) {
+    match find_split(t.src, &b, ctx) {
         Some(s) => {
             if ctx.prefers_leaf(n, ctx.area.of_box(&b), s.cost) {
                 return t.leaf(&b, out);
@@ -383,8 +382,8 @@ fn join(
 }
 
 /// Binning of one axis: a reference goes to bin `(min + max - k0) * k1`, clamped to
-/// `0..=last`. Binning keeps that value in the reference, and [`partition`] classifies by it,
-/// so the counts of the bins are exactly the sizes of the children.
+/// `0..=last`. The same function classifies references in [`partition`], so the counts of the
+/// bins are exactly the sizes of the children.
 #[derive(Clone, Copy)]
 struct Binning {
     axis: usize,
@@ -414,32 +413,20 @@ impl Binning {
         })
     }
 
-    /// The bin of `r` as a float in `0..=last` (its bin is the integer part), which binning
-    /// keeps in `r.max[3]` for [`partition`].
     #[inline(always)]
-    fn key(&self, r: &PrimRef) -> f32 {
+    fn bin(&self, r: &PrimRef) -> usize {
         let f = (r.min[self.axis] + r.max[self.axis] - self.k0) * self.k1;
         // NaN (from infinite sums near f32::MAX) goes to the last bin.
         let f = if f < self.last { f } else { self.last };
-        if f > 0.0 {
-            f
-        } else {
-            0.0
-        }
-    }
-
-    /// Bins `r`: stores its key in `r.max[3]` and returns its bin.
-    #[inline(always)]
-    fn bin(&self, r: &mut PrimRef) -> usize {
-        let f = self.key(r);
-        r.max[3] = f;
+        let f = if f > 0.0 { f } else { 0.0 };
         // SAFETY: `f` is finite and in `0..=last`, and `last < MAX_BINS`.
-        (unsafe { f.to_int_unchecked::<u32>() } as usize) & (MAX_BINS - 1)
+        unsafe { f.to_int_unchecked::<u32>() as usize }
     }
 }
 
 /// The chosen split of a binned node.
 struct Split {
+    binning: Binning,
     /// References in bins `0..=bin` go left.
     bin: usize,
     /// Sum over the children of half-area (scaled) times primitive count.
@@ -458,7 +445,7 @@ fn bin_count(n: usize, max: usize) -> usize {
 /// Bins the centroids along the widest axis of `b` (the next widest when that gives no
 /// split) and returns the cheapest split.
 #[inline(never)]
-fn find_split(refs: &mut [PrimRef], b: &Box4, ctx: &Ctx) -> Option<Split> {
+fn find_split(refs: &[PrimRef], b: &Box4, ctx: &Ctx) -> Option<Split> {
     let nb = bin_count(refs.len(), ctx.bins);
     let e = b.hi.sub(b.lo).to_array();
     // Axes by decreasing extent.
@@ -479,7 +466,7 @@ fn find_split(refs: &mut [PrimRef], b: &Box4, ctx: &Ctx) -> Option<Split> {
 
 /// Bins `refs` with `bn` and sweeps the bins for the cheapest split.
 #[inline(always)]
-fn split_axis(refs: &mut [PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option<Split> {
+fn split_axis(refs: &[PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option<Split> {
     let mut bins = [Box4::empty(); MAX_BINS];
     let mut counts = [0u32; MAX_BINS];
     if refs.len() >= TWO_BIN_SETS {
@@ -487,19 +474,18 @@ fn split_axis(refs: &mut [PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option
         // do not wait for each other's update.
         let mut bins2 = [Box4::empty(); MAX_BINS];
         let mut counts2 = [0u32; MAX_BINS];
-        let mut pairs = refs.chunks_exact_mut(2);
+        let mut pairs = refs.chunks_exact(2);
         for p in &mut pairs {
-            let (r0, r1) = p.split_at_mut(1);
-            let (r0, r1) = (&mut r0[0], &mut r1[0]);
-            let j0 = bn.bin(r0);
-            let j1 = bn.bin(r1);
+            let (r0, r1) = (&p[0], &p[1]);
+            let j0 = bn.bin(r0) & (MAX_BINS - 1);
+            let j1 = bn.bin(r1) & (MAX_BINS - 1);
             bins[j0].grow(r0.lo(), r0.hi());
             counts[j0] += 1;
             bins2[j1].grow(r1.lo(), r1.hi());
             counts2[j1] += 1;
         }
-        for r in pairs.into_remainder() {
-            let j = bn.bin(r);
+        for r in pairs.remainder() {
+            let j = bn.bin(r) & (MAX_BINS - 1);
             bins[j].grow(r.lo(), r.hi());
             counts[j] += 1;
         }
@@ -509,7 +495,7 @@ fn split_axis(refs: &mut [PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option
         }
     } else {
         for r in refs {
-            let j = bn.bin(r);
+            let j = bn.bin(r) & (MAX_BINS - 1);
             bins[j].grow(r.lo(), r.hi());
             counts[j] += 1;
         }
@@ -552,6 +538,7 @@ fn split_axis(refs: &mut [PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option
         }
     }
     Some(Split {
+        binning: bn,
         bin,
         cost,
         left_count,
@@ -560,15 +547,12 @@ fn split_axis(refs: &mut [PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option
     })
 }
 
-/// Partitions `src` into `dst`: references in bins `0..=s.bin` first, order kept. Reads the
-/// bins that binning kept in `max[3]` (a reference is in bin `j` when its key is in
-/// `j..j + 1`).
+/// Partitions `src` into `dst`: references in bins `0..=s.bin` first, order kept.
 #[inline(never)]
 fn partition(src: &[PrimRef], dst: &mut [PrimRef], s: &Split) {
     let (mut l, mut r) = (0usize, s.left_count);
-    let limit = (s.bin + 1) as f32;
     for e in src {
-        let goes_left = e.max[3] < limit;
+        let goes_left = s.binning.bin(e) <= s.bin;
         let pos = if goes_left { l } else { r };
         dst[pos] = *e;
         l += goes_left as usize;
