@@ -112,6 +112,9 @@ impl Bvh {
                             meta: n.meta[lane],
                             t: entries[lane],
                         };
+                        // Start loading what visiting it reads now, the nearest one included:
+                        // the sort below and the pushes overlap those misses.
+                        self.prefetch_entry(r4, &e);
                         let mut j = len;
                         while j > 0 && hits[j - 1].t > e.t {
                             hits[j] = hits[j - 1];
@@ -120,10 +123,8 @@ impl Bvh {
                         hits[j] = e;
                         len += 1;
                     }
-                    // The others go on the stack farthest first; start loading what they will
-                    // read while the nearest one is visited.
+                    // The others go on the stack farthest first.
                     for e in hits[1..len].iter().rev() {
-                        self.prefetch_entry(r4, e);
                         stack.push(*e);
                     }
                     cur = hits[0];
