@@ -143,12 +143,8 @@ impl Bvh {
                 // itself, so the callback comes without another dependent load.
                 let prim = cur.first;
                 if let Some(t) = hit(prim, best_t) {
-                    if t <= best_t && (best.is_none() || t < best_t) {
-                        best_t = t;
-                        best = Some(RayHit { primitive: prim, t });
-                        if ANY {
-                            return best;
-                        }
+                    if take_hit(&mut best, &mut best_t, prim, t) && ANY {
+                        return best;
                     }
                 }
             } else {
@@ -172,12 +168,8 @@ impl Bvh {
                     }
                     let prim = self.prim_indices[slot];
                     if let Some(t) = hit(prim, best_t) {
-                        if t <= best_t && (best.is_none() || t < best_t) {
-                            best_t = t;
-                            best = Some(RayHit { primitive: prim, t });
-                            if ANY {
-                                return best;
-                            }
+                        if take_hit(&mut best, &mut best_t, prim, t) && ANY {
+                            return best;
                         }
                     }
                 }
@@ -189,12 +181,8 @@ impl Bvh {
                     }
                     let prim = self.prim_indices[slot as usize];
                     if let Some(t) = hit(prim, best_t) {
-                        if t <= best_t && (best.is_none() || t < best_t) {
-                            best_t = t;
-                            best = Some(RayHit { primitive: prim, t });
-                            if ANY {
-                                return best;
-                            }
+                        if take_hit(&mut best, &mut best_t, prim, t) && ANY {
+                            return best;
                         }
                     }
                 }
@@ -249,6 +237,19 @@ fn prefetch<T>(p: *const T) {
 /// sooner (the others cost bandwidth, which a single ray leaves spare). In a smaller tree the
 /// extra instructions cost more than they save.
 const EAGER_PREFETCH_BYTES: usize = 1 << 20;
+
+/// Records `t` as the best hit (with `prim`) when it is within `best_t` and, ties keeping
+/// the first found, strictly earlier than the current best; `true` when it did.
+#[inline(always)]
+fn take_hit(best: &mut Option<RayHit>, best_t: &mut f32, prim: u32, t: f32) -> bool {
+    if t <= *best_t && (best.is_none() || t < *best_t) {
+        *best_t = t;
+        *best = Some(RayHit { primitive: prim, t });
+        true
+    } else {
+        false
+    }
+}
 
 /// Largest leaf whose primitives are tested in ray-entry order.
 const SORTED_LEAF: usize = 8;
