@@ -228,16 +228,6 @@ impl ProxyTree {
         }
     }
 
-    /// Calls `f` with every live proxy whose fat box contains `point`.
-    pub fn for_each_containing_point(
-        &self,
-        proxies: &[Option<Proxy>],
-        point: &Point3<f32>,
-        f: impl FnMut(u32),
-    ) {
-        self.for_each_overlap(proxies, &Aabb::new(*point, *point), f);
-    }
-
     /// The closest hit of `ray` within `t_max` over members and pending proxies: `hit(id,
     /// best_t)` gives the exact time of impact with proxy `id` (as in `Bvh::cast_ray`).
     pub fn cast_ray(

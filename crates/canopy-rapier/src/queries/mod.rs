@@ -155,6 +155,34 @@ impl<'a> SceneQueries<'a> {
         m != Mobility::Fixed || self.broad_phase.config().fixed_margin > 0.0
     }
 
+    /// Every collider that passes the filter, whose boxes meet `aabb` (the fat box, then the
+    /// collision box of the last update; the current box for colliders edited since) and for
+    /// which `exact` holds: tree members in tree order, then edited colliders. The common body
+    /// of the intersection queries.
+    pub(crate) fn colliders_in_aabb(
+        &self,
+        aabb: &Aabb,
+        exact: impl Fn(&Collider) -> bool,
+    ) -> Vec<(ColliderHandle, &'a Collider)> {
+        let mut found = Vec::new();
+        self.cull_aabb(aabb, |id| {
+            if !self.tight(id).intersects(aabb) {
+                return;
+            }
+            if let Some((handle, collider)) = self.collider(id) {
+                if exact(collider) {
+                    found.push((handle, collider));
+                }
+            }
+        });
+        for (handle, collider, b) in self.edited() {
+            if b.intersects(aabb) && exact(collider) {
+                found.push((handle, collider));
+            }
+        }
+        found
+    }
+
     /// Calls `f` with every proxy whose fat box overlaps `aabb`, over the three trees.
     pub(crate) fn cull_aabb(&self, aabb: &Aabb, mut f: impl FnMut(u32)) {
         let bp = self.broad_phase;

@@ -2,6 +2,7 @@
 
 use super::{finite, SceneQueries};
 use crate::filter::Mobility;
+use canopy_core::Aabb;
 use rapier3d::prelude::{Collider, ColliderHandle, Point, PointProjection, Real};
 
 impl<'a> SceneQueries<'a> {
@@ -66,30 +67,12 @@ impl<'a> SceneQueries<'a> {
         &self,
         point: Point<Real>,
     ) -> impl Iterator<Item = (ColliderHandle, &'a Collider)> + 'a {
-        let bp = self.broad_phase;
-        let mut found = Vec::new();
         if !finite(point.iter()) {
-            return found.into_iter();
+            return Vec::new().into_iter();
         }
         let contains =
             |collider: &Collider| collider.shape().contains_point(collider.position(), &point);
-        for m in Mobility::ALL {
-            bp.trees[m as usize].for_each_containing_point(&bp.proxies, &point, |id| {
-                if !self.tight(id).contains_point(&point) {
-                    return;
-                }
-                if let Some((handle, collider)) = self.collider(id) {
-                    if contains(collider) {
-                        found.push((handle, collider));
-                    }
-                }
-            });
-        }
-        for (handle, collider, aabb) in self.edited() {
-            if aabb.contains_point(&point) && contains(collider) {
-                found.push((handle, collider));
-            }
-        }
-        found.into_iter()
+        self.colliders_in_aabb(&Aabb::new(point, point), contains)
+            .into_iter()
     }
 }

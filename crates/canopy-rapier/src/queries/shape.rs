@@ -105,9 +105,8 @@ impl<'a> SceneQueries<'a> {
         shape_pos: Isometry<Real>,
         shape: &'a dyn Shape,
     ) -> impl Iterator<Item = (ColliderHandle, &'a Collider)> + 'a {
-        let mut found = Vec::new();
         if !valid_pose(&shape_pos) {
-            return found.into_iter();
+            return Vec::new().into_iter();
         }
         let aabb = to_canopy(&shape.compute_aabb(&shape_pos));
         let dispatcher = self.dispatcher;
@@ -115,22 +114,7 @@ impl<'a> SceneQueries<'a> {
             let pos12 = shape_pos.inv_mul(collider.position());
             dispatcher.intersection_test(&pos12, shape, collider.shape()) == Ok(true)
         };
-        self.cull_aabb(&aabb, |id| {
-            if !self.tight(id).intersects(&aabb) {
-                return;
-            }
-            if let Some((handle, collider)) = self.collider(id) {
-                if intersects(collider) {
-                    found.push((handle, collider));
-                }
-            }
-        });
-        for (handle, collider, b) in self.edited() {
-            if b.intersects(&aabb) && intersects(collider) {
-                found.push((handle, collider));
-            }
-        }
-        found.into_iter()
+        self.colliders_in_aabb(&aabb, intersects).into_iter()
     }
 
     /// Every collider whose broadphase box intersects `aabb`, as Rapier's
@@ -143,20 +127,7 @@ impl<'a> SceneQueries<'a> {
         &self,
         aabb: rapier3d::prelude::Aabb,
     ) -> impl Iterator<Item = (ColliderHandle, &'a Collider)> + 'a {
-        let aabb = to_canopy(&aabb);
-        let mut found = Vec::new();
-        self.cull_aabb(&aabb, |id| {
-            if self.tight(id).intersects(&aabb) {
-                if let Some(hit) = self.collider(id) {
-                    found.push(hit);
-                }
-            }
-        });
-        for (handle, collider, b) in self.edited() {
-            if b.intersects(&aabb) {
-                found.push((handle, collider));
-            }
-        }
-        found.into_iter()
+        self.colliders_in_aabb(&to_canopy(&aabb), |_| true)
+            .into_iter()
     }
 }
