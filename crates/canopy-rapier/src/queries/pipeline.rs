@@ -145,6 +145,9 @@ impl CanopyBroadPhase {
     /// the edits [`Self::refresh_queries`] recorded): built on the first call, then updated
     /// where proxies changed since the previous call.
     pub fn sync_query_pipeline(&mut self, colliders: &ColliderSet) {
+        if self.mirror.active && self.mirror.dirty.is_empty() {
+            return;
+        }
         let extra: FxHashMap<u32, ColliderHandle> = self
             .overlay
             .extra()
@@ -170,9 +173,6 @@ impl CanopyBroadPhase {
                     .filter_map(|(i, b)| b.map(|b| (i, b))),
             );
             self.mirror.leaves = boxes;
-            return;
-        }
-        if self.mirror.dirty.is_empty() {
             return;
         }
         let mut dirty = std::mem::take(&mut self.mirror.dirty);
