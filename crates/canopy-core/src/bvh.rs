@@ -77,8 +77,8 @@ impl Node {
 }
 
 /// Both children of one interior node side by side in one 64-byte cache line, so that the pair
-/// walk tests both children of a node from one line (the ray casts walk a four-wide copy, in
-/// `query/ray.rs`). A child that is an interior node has `count == 0` and `first` = the index
+/// walks test both children of a node from one line (the ray casts and the serial self-pair
+/// walk use a four-wide copy, in `query/ray.rs`). A child that is an interior node has `count == 0` and `first` = the index
 /// of *its* `Wide` (not a node index); a leaf child is the leaf node itself. `wide[0]` holds
 /// the root (twice); interior node `k` in depth-first order (root `k = 0`) has its children in
 /// `wide[k + 1]`. A child is addressed as `2 * wide index + side` (root: 0).
@@ -204,8 +204,9 @@ pub struct Bvh {
     /// Both children of each interior node in one cache line (see [`Wide`]), for the pair walk;
     /// made with the tree and refit with it.
     pub(crate) wide: Vec<Wide>,
-    /// The four-wide copy of the tree that the ray casts walk (see `query/ray.rs`): made by the
-    /// first ray cast after a build, refit with the tree once made.
+    /// The four-wide copy of the tree that the ray casts and [`Bvh::self_pairs`] walk (see
+    /// `query/ray.rs`): made by the first such query after a build, refit with the tree once
+    /// made.
     pub(crate) ray4: std::sync::OnceLock<crate::query::ray::Ray4>,
 }
 

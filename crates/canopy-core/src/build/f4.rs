@@ -112,6 +112,21 @@ mod imp {
         pub(crate) fn shift_down(self) -> F4 {
             unsafe { F4(_mm_shuffle_ps::<0b11_11_10_01>(self.0, self.0)) }
         }
+        /// All bits of lane `i` set when lane `i` of `self` is `<=` lane `i` of `o`, else clear.
+        #[inline(always)]
+        pub(crate) fn le(self, o: F4) -> F4 {
+            unsafe { F4(_mm_cmple_ps(self.0, o.0)) }
+        }
+        /// Bitwise and (of masks from [`F4::le`]).
+        #[inline(always)]
+        pub(crate) fn and(self, o: F4) -> F4 {
+            unsafe { F4(_mm_and_ps(self.0, o.0)) }
+        }
+        /// Bit `i` set when the sign bit of lane `i` is (a mask from [`F4::le`]: lane set).
+        #[inline(always)]
+        pub(crate) fn bits(self) -> u32 {
+            unsafe { _mm_movemask_ps(self.0) as u32 }
+        }
     }
 }
 
@@ -207,6 +222,20 @@ mod imp {
         pub(crate) fn shift_down(self) -> F4 {
             F4([self.0[1], self.0[2], self.0[3], self.0[3]])
         }
+        #[inline(always)]
+        pub(crate) fn le(self, o: F4) -> F4 {
+            let m = |i: usize| f32::from_bits(if self.0[i] <= o.0[i] { u32::MAX } else { 0 });
+            F4([m(0), m(1), m(2), m(3)])
+        }
+        #[inline(always)]
+        pub(crate) fn and(self, o: F4) -> F4 {
+            let m = |i: usize| f32::from_bits(self.0[i].to_bits() & o.0[i].to_bits());
+            F4([m(0), m(1), m(2), m(3)])
+        }
+        #[inline(always)]
+        pub(crate) fn bits(self) -> u32 {
+            (0..4).fold(0, |m, i| m | ((self.0[i].to_bits() >> 31) << i))
+        }
     }
 }
 
@@ -262,6 +291,9 @@ mod tests {
         assert_eq!(F4::new(0.5, 1.9, 7.0, 0.0).to_i32(), [0, 1, 7, 0]);
         assert_eq!(a.le_bits(b), 0b0101);
         assert_eq!(a.shift_down().to_array(), [2.0, 3.0, 4.0, 4.0]);
+        assert_eq!(a.le(b).bits(), 0b0101);
+        assert_eq!(a.le(b).and(b.le(a)).bits(), 0);
+        assert_eq!(a.le(a).and(b.le(b)).bits(), 0b1111);
     }
 
     #[test]

@@ -1,10 +1,11 @@
 //! Queries on a built [`crate::Bvh`], one family per file: `overlap.rs` (boxes and points),
 //! `ray.rs` (closest and any hit), `nearest.rs` (best-first), `pairs.rs` (self and
-//! tree-vs-tree pairs, serial and rayon-parallel).
+//! tree-vs-tree pairs, serial and rayon-parallel), `pairs4.rs` (the serial self-pair walk).
 
 pub mod nearest;
 pub mod overlap;
 pub mod pairs;
+mod pairs4;
 pub mod ray;
 
 use smallvec::SmallVec;

@@ -8,12 +8,12 @@
 //! the root task breadth-first into a fixed number of independent tasks, run those on rayon, and
 //! concatenate the results in task order.
 //!
-//! The serial unmarked walks and the parallel self query run on the tree's wide array (both
-//! children of a node in one cache line); the others on the nodes. The plain self queries
-//! (serial and parallel) have a walk of their own: tasks are pairs of references to wide
-//! entries, pushed without branches (every candidate is written, the stack length grows by the
-//! box test's result), and the children line of a right child is prefetched as its tasks are
-//! pushed.
+//! [`Bvh::self_pairs`] walks the four-wide copy of the tree instead (see `pairs4.rs`). The
+//! serial unmarked tree-vs-tree walk and the parallel self query run on the tree's wide array
+//! (both children of a node in one cache line); the others on the nodes. The parallel self
+//! query has a walk of its own: tasks are pairs of references to wide entries, pushed without
+//! branches (every candidate is written, the stack length grows by the box test's result), and
+//! the children line of a right child is prefetched as its tasks are pushed.
 //!
 //! The `_marked` variants report only pairs with at least one *marked* primitive (a broadphase
 //! marks the proxies that moved). [`PairMarks`] summarises the marks per node, so whole
@@ -538,7 +538,7 @@ impl<'a> PairStack<'a> {
     }
 }
 
-/// The unmarked self walk ([`Bvh::self_pairs`]) from task `start` (`(root, root)` for the
+/// The unmarked self walk of [`Bvh::par_self_pairs`] from task `start` (`(root, root)` for the
 /// whole tree; see [`EntryPair`]): the tasks of [`wwalk`] for one tree, held as references to their two entries (nothing to look
 /// up on a pop), and pushed without branches (see [`PairStack`]). Two one-primitive leaves
 /// found overlapping are pushed like any task and reported when popped.
@@ -883,9 +883,9 @@ impl Bvh {
     /// assert_eq!(pairs, (0..9).map(|i| (i, i + 1)).collect::<Vec<_>>());
     /// # Ok::<(), canopy_core::BvhError>(())
     /// ```
-    pub fn self_pairs(&self, mut f: impl FnMut(u32, u32)) {
-        if let Some(root) = self.wide.first() {
-            self_walk(self, (&root.0[0], &root.0[0]), &mut f);
+    pub fn self_pairs(&self, f: impl FnMut(u32, u32)) {
+        if !self.nodes.is_empty() {
+            super::pairs4::self_pairs4(self, f);
         }
     }
 

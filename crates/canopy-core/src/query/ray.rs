@@ -85,9 +85,7 @@ impl Bvh {
             return None;
         }
         ray.slab(&root.min, &root.max, t_max)?;
-        let r4 = self
-            .ray4
-            .get_or_init(|| Ray4::new(&self.nodes, &self.prim_indices));
+        let r4 = self.four_wide();
         let slab = SignedSlab4::new(ray);
         let eager = r4.nodes.len() * std::mem::size_of::<Node4>() > EAGER_PREFETCH_BYTES;
         let mut best: Option<RayHit> = None;
@@ -200,6 +198,12 @@ impl Bvh {
         }
     }
 
+    /// The four-wide copy of this (non-empty) tree, made on first use.
+    pub(crate) fn four_wide(&self) -> &Ray4 {
+        self.ray4
+            .get_or_init(|| Ray4::new(&self.nodes, &self.prim_indices))
+    }
+
     /// Starts loading the first lines that visiting `e` reads: its [`Node4`] for an interior
     /// node, its first primitive's box for a leaf of several (a leaf of one reads nothing of
     /// the tree).
@@ -255,7 +259,7 @@ fn take_hit(best: &mut Option<RayHit>, best_t: &mut f32, prim: u32, t: f32) -> b
 const SORTED_LEAF: usize = 8;
 
 /// [`Node4::meta`] of an interior child.
-const INTERIOR: u32 = u32::MAX;
+pub(crate) const INTERIOR: u32 = u32::MAX;
 
 /// A child to visit: `first` and `meta` as in [`Node4`], `t` the time the ray enters its box.
 #[derive(Clone, Copy, Debug)]
@@ -278,9 +282,9 @@ struct Entry {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(128))]
 pub(crate) struct Node4 {
-    b: [[f32; 4]; 6],
-    first: [u32; 4],
-    meta: [u32; 4],
+    pub(crate) b: [[f32; 4]; 6],
+    pub(crate) first: [u32; 4],
+    pub(crate) meta: [u32; 4],
 }
 
 const _: () = assert!(std::mem::size_of::<Node4>() == 128);
@@ -319,7 +323,8 @@ impl Node4 {
     }
 }
 
-/// The four-wide tree of the ray casts, made from the binary one: each `Node4` takes the
+/// The four-wide tree of the ray casts (and of the self-pair walk, `pairs4.rs`), made from the
+/// binary one: each `Node4` takes the
 /// children of one binary interior node, then repeatedly replaces its interior child of largest
 /// surface area by that child's two children, up to four (a binary leaf root gives one node
 /// with that leaf as its only child). Node 0 is the root; the children of a node are stored
@@ -328,7 +333,7 @@ impl Node4 {
 /// copies (`u32::MAX` for an empty lane), for refit.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Ray4 {
-    nodes: Vec<Node4>,
+    pub(crate) nodes: Vec<Node4>,
     src: Vec<[u32; 4]>,
 }
 
@@ -444,7 +449,7 @@ impl Ray4 {
     /// traversal only follows such references or starts at the root, 0, of a tree made from a
     /// non-empty binary tree (which always has one node).
     #[inline(always)]
-    fn at(&self, i: usize) -> &Node4 {
+    pub(crate) fn at(&self, i: usize) -> &Node4 {
         debug_assert!(i < self.nodes.len());
         // SAFETY: see above.
         unsafe { self.nodes.get_unchecked(i) }

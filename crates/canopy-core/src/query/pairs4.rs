@@ -1,0 +1,291 @@
+//! The walk of [`Bvh::self_pairs`]: the bounding volume test tree of the four-wide copy of the
+//! tree (`Ray4`, made on first use and shared with the ray casts, see `ray.rs`) against itself.
+//!
+//! A task is a pair of `Node4`s whose boxes overlap, or one `Node4` against itself. A node
+//! against itself tests each of its lanes against the later lanes; two nodes test each lane of
+//! the first against the four lanes of the second. Each such test is one box against four (one
+//! SSE comparison per face). Two overlapping interior lanes make a new task; a leaf lane that
+//! overlaps an interior lane becomes a query of each of the leaf's primitives down that
+//! subtree, made at once; two leaf lanes compare their primitives at once.
+
+use super::ray::{Node4, Ray4, INTERIOR};
+use crate::build::f4::{overlap, prim_box, F4};
+use crate::bvh::{Bvh, PrimBounds};
+
+/// One box in every lane, to test against the four lanes of a [`Node4`].
+#[derive(Clone, Copy)]
+struct Splat {
+    lo: [F4; 3],
+    hi: [F4; 3],
+}
+
+impl Splat {
+    /// The box of lane `lane` of `n`.
+    #[inline(always)]
+    fn lane(n: &Node4, lane: usize) -> Self {
+        Self {
+            lo: [0, 1, 2].map(|a| F4::splat(n.b[a][lane])),
+            hi: [0, 1, 2].map(|a| F4::splat(n.b[3 + a][lane])),
+        }
+    }
+
+    /// A primitive's box.
+    #[inline(always)]
+    fn prim(p: &PrimBounds) -> Self {
+        Self {
+            lo: p.min.map(F4::splat),
+            hi: p.max.map(F4::splat),
+        }
+    }
+
+    /// Bit `i` set when the box overlaps the box of lane `i` of `n` (closed boxes; an empty
+    /// lane's inverted box overlaps nothing).
+    #[inline(always)]
+    fn hits(&self, n: &Node4) -> u32 {
+        let mut m = F4::load4(&n.b[0])
+            .le(self.hi[0])
+            .and(self.lo[0].le(F4::load4(&n.b[3])));
+        for a in 1..3 {
+            m = m
+                .and(F4::load4(&n.b[a]).le(self.hi[a]))
+                .and(self.lo[a].le(F4::load4(&n.b[3 + a])));
+        }
+        m.bits()
+    }
+}
+
+/// The box of lane `lane` of `n` as two vectors (lane 3 zero), as [`prim_box`] gives.
+#[inline(always)]
+fn lane_box(n: &Node4, lane: usize) -> (F4, F4) {
+    (
+        F4::new(n.b[0][lane], n.b[1][lane], n.b[2][lane], 0.0),
+        F4::new(n.b[3][lane], n.b[4][lane], n.b[5][lane], 0.0),
+    )
+}
+
+/// Reports the pair of primitives `a` and `b` (different), smaller index first.
+#[inline(always)]
+fn report(a: u32, b: u32, f: &mut impl FnMut(u32, u32)) {
+    f(a.min(b), a.max(b));
+}
+
+/// A hint to start loading `Node4` `i` (both of its lines); never faults.
+#[inline(always)]
+fn prefetch_node(r4: &Ray4, i: u32) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let p = r4.nodes.as_ptr().wrapping_add(i as usize).cast::<i8>();
+        // SAFETY: a prefetch is only a hint: it never faults and never changes memory, whatever
+        // the address; SSE is part of the x86_64 baseline.
+        unsafe {
+            _mm_prefetch::<_MM_HINT_T0>(p);
+            _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64));
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (r4, i);
+}
+
+/// The state of one self walk.
+struct Walk<'a, F> {
+    t: &'a Bvh,
+    r4: &'a Ray4,
+    /// Node-pair tasks (`a == b`: node `a` against itself).
+    tasks: Vec<(u32, u32)>,
+    /// Scratch stack of the primitive queries.
+    qstack: Vec<u32>,
+    f: F,
+}
+
+impl<F: FnMut(u32, u32)> Walk<'_, F> {
+    fn run(&mut self, start: (u32, u32)) {
+        self.tasks.push(start);
+        while let Some((a, b)) = self.tasks.pop() {
+            if a == b {
+                self.node_self(a);
+            } else {
+                self.node_pair(a, b);
+            }
+        }
+    }
+
+    /// Node `k` against itself.
+    #[inline(always)]
+    fn node_self(&mut self, k: u32) {
+        let r4 = self.r4;
+        let n = r4.at(k as usize);
+        for i in 0..4 {
+            let meta = n.meta[i];
+            if meta == INTERIOR {
+                prefetch_node(r4, n.first[i]);
+                self.tasks.push((n.first[i], n.first[i]));
+            } else if meta > 1 {
+                self.leaf_self(n.first[i] as usize, meta as usize);
+            }
+            if i < 3 {
+                let mut m = Splat::lane(n, i).hits(n) & (0b1110 << i) & 0b1111;
+                while m != 0 {
+                    let j = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    self.lanes(n, i, n, j);
+                }
+            }
+        }
+    }
+
+    /// Nodes `a` and `b` (different, boxes overlapping) against each other.
+    #[inline(always)]
+    fn node_pair(&mut self, a: u32, b: u32) {
+        let r4 = self.r4;
+        let (na, nb) = (r4.at(a as usize), r4.at(b as usize));
+        for i in 0..4 {
+            let mut m = Splat::lane(na, i).hits(nb);
+            while m != 0 {
+                let j = m.trailing_zeros() as usize;
+                m &= m - 1;
+                self.lanes(na, i, nb, j);
+            }
+        }
+    }
+
+    /// Lane `i` of `na` against lane `j` of `nb`, whose boxes overlap (different subtrees).
+    #[inline(always)]
+    fn lanes(&mut self, na: &Node4, i: usize, nb: &Node4, j: usize) {
+        match (na.meta[i] == INTERIOR, nb.meta[j] == INTERIOR) {
+            (true, true) => {
+                let (x, y) = (na.first[i], nb.first[j]);
+                prefetch_node(self.r4, x);
+                prefetch_node(self.r4, y);
+                self.tasks.push((x, y));
+            }
+            (false, true) => self.leaf_into(na, i, nb, j),
+            (true, false) => self.leaf_into(nb, j, na, i),
+            (false, false) => {
+                if na.meta[i] == 1 && nb.meta[j] == 1 {
+                    // One-primitive leaves have their primitive's box, seen to overlap.
+                    report(na.first[i], nb.first[j], &mut self.f);
+                } else {
+                    self.leaf_leaf(na, i, nb, j);
+                }
+            }
+        }
+    }
+
+    /// The pairs within the leaf of `count` primitives from slot `first`.
+    fn leaf_self(&mut self, first: usize, count: usize) {
+        let t = self.t;
+        for s in first..first + count {
+            let (plo, phi) = prim_box(&t.prim_bounds[s]);
+            for u in s + 1..first + count {
+                let (ulo, uhi) = prim_box(&t.prim_bounds[u]);
+                if overlap(plo, phi, ulo, uhi) {
+                    report(t.prim_indices[s], t.prim_indices[u], &mut self.f);
+                }
+            }
+        }
+    }
+
+    /// The primitive pairs of leaf lanes `i` of `na` and `j` of `nb` (not both of one
+    /// primitive).
+    fn leaf_leaf(&mut self, na: &Node4, i: usize, nb: &Node4, j: usize) {
+        let t = self.t;
+        let prims = |n: &Node4, lane: usize| {
+            let (first, meta) = (n.first[lane] as usize, n.meta[lane] as usize);
+            if meta == 1 {
+                // Slot-free: the lane holds the primitive index and its box.
+                (first..first + 1, true)
+            } else {
+                (first..first + meta, false)
+            }
+        };
+        let get = |n: &Node4, lane: usize, single: bool, s: usize| {
+            if single {
+                (lane_box(n, lane), s as u32)
+            } else {
+                (prim_box(&t.prim_bounds[s]), t.prim_indices[s])
+            }
+        };
+        let (ra, sa) = prims(na, i);
+        let (rb, sb) = prims(nb, j);
+        for s in ra {
+            let ((plo, phi), ip) = get(na, i, sa, s);
+            for u in rb.clone() {
+                let ((ulo, uhi), iu) = get(nb, j, sb, u);
+                if overlap(plo, phi, ulo, uhi) {
+                    report(ip, iu, &mut self.f);
+                }
+            }
+        }
+    }
+
+    /// Leaf lane `i` of `nl` against interior lane `j` of `ns` (boxes overlapping): each of
+    /// the leaf's primitives whose box overlaps the lane's is queried down that subtree.
+    fn leaf_into(&mut self, nl: &Node4, i: usize, ns: &Node4, j: usize) {
+        let root = ns.first[j];
+        let (first, meta) = (nl.first[i], nl.meta[i]);
+        if meta == 1 {
+            self.query(&Splat::lane(nl, i), lane_box(nl, i), first, root);
+            return;
+        }
+        let (slo, shi) = lane_box(ns, j);
+        let t = self.t;
+        for s in first as usize..first as usize + meta as usize {
+            let p = &t.prim_bounds[s];
+            let (plo, phi) = prim_box(p);
+            if overlap(plo, phi, slo, shi) {
+                self.query(&Splat::prim(p), (plo, phi), t.prim_indices[s], root);
+            }
+        }
+    }
+
+    /// Reports the pairs of primitive `ip` (box `p`, also as `pbox`) with the primitives under
+    /// `Node4` `root` (whose box it overlaps; `ip` is not under it).
+    fn query(&mut self, p: &Splat, pbox: (F4, F4), ip: u32, root: u32) {
+        let (t, r4) = (self.t, self.r4);
+        self.qstack.clear();
+        let mut cur = root;
+        loop {
+            let n = r4.at(cur as usize);
+            let mut m = p.hits(n);
+            let mut next = None;
+            while m != 0 {
+                let lane = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let (first, meta) = (n.first[lane], n.meta[lane]);
+                if meta == INTERIOR {
+                    prefetch_node(r4, first);
+                    if let Some(x) = next.replace(first) {
+                        self.qstack.push(x);
+                    }
+                } else if meta == 1 {
+                    report(ip, first, &mut self.f);
+                } else {
+                    for s in first as usize..first as usize + meta as usize {
+                        let (ulo, uhi) = prim_box(&t.prim_bounds[s]);
+                        if overlap(pbox.0, pbox.1, ulo, uhi) {
+                            report(ip, t.prim_indices[s], &mut self.f);
+                        }
+                    }
+                }
+            }
+            match next.or_else(|| self.qstack.pop()) {
+                Some(c) => cur = c,
+                None => return,
+            }
+        }
+    }
+}
+
+/// Every overlapping pair of primitives of the non-empty tree `t`, once each, to `f`.
+pub(crate) fn self_pairs4(t: &Bvh, f: impl FnMut(u32, u32)) {
+    let r4 = t.four_wide();
+    let mut w = Walk {
+        t,
+        r4,
+        tasks: Vec::with_capacity(256),
+        qstack: Vec::with_capacity(64),
+        f,
+    };
+    w.run((0, 0));
+}
