@@ -122,6 +122,17 @@ mod imp {
         pub(crate) fn and(self, o: F4) -> F4 {
             unsafe { F4(_mm_and_ps(self.0, o.0)) }
         }
+        /// Lane `i` holds lane `(i + K) % 4` (`K` in `1..=3`).
+        #[inline(always)]
+        pub(crate) fn rot<const K: i32>(self) -> F4 {
+            unsafe {
+                match K {
+                    1 => F4(_mm_shuffle_ps::<0b00_11_10_01>(self.0, self.0)),
+                    2 => F4(_mm_shuffle_ps::<0b01_00_11_10>(self.0, self.0)),
+                    _ => F4(_mm_shuffle_ps::<0b10_01_00_11>(self.0, self.0)),
+                }
+            }
+        }
         /// Bit `i` set when the sign bit of lane `i` is (a mask from [`F4::le`]: lane set).
         #[inline(always)]
         pub(crate) fn bits(self) -> u32 {
@@ -233,6 +244,11 @@ mod imp {
             F4([m(0), m(1), m(2), m(3)])
         }
         #[inline(always)]
+        pub(crate) fn rot<const K: i32>(self) -> F4 {
+            let k = K as usize;
+            F4([0, 1, 2, 3].map(|i| self.0[(i + k) % 4]))
+        }
+        #[inline(always)]
         pub(crate) fn bits(self) -> u32 {
             (0..4).fold(0, |m, i| m | ((self.0[i].to_bits() >> 31) << i))
         }
@@ -292,6 +308,9 @@ mod tests {
         assert_eq!(a.le_bits(b), 0b0101);
         assert_eq!(a.shift_down().to_array(), [2.0, 3.0, 4.0, 4.0]);
         assert_eq!(a.le(b).bits(), 0b0101);
+        assert_eq!(a.rot::<1>().to_array(), [2.0, 3.0, 4.0, 1.0]);
+        assert_eq!(a.rot::<2>().to_array(), [3.0, 4.0, 1.0, 2.0]);
+        assert_eq!(a.rot::<3>().to_array(), [4.0, 1.0, 2.0, 3.0]);
         assert_eq!(a.le(b).and(b.le(a)).bits(), 0);
         assert_eq!(a.le(a).and(b.le(b)).bits(), 0b1111);
     }

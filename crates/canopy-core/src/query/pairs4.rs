@@ -54,6 +54,43 @@ impl Splat {
     }
 }
 
+/// The four boxes of a [`Node4`] loaded by face: `lo[a]` the smallest coordinates along axis
+/// `a`, `hi[a]` the largest.
+#[derive(Clone, Copy)]
+struct Rows {
+    lo: [F4; 3],
+    hi: [F4; 3],
+}
+
+impl Rows {
+    #[inline(always)]
+    fn of(n: &Node4) -> Self {
+        Self {
+            lo: [0, 1, 2].map(|a| F4::load4(&n.b[a])),
+            hi: [0, 1, 2].map(|a| F4::load4(&n.b[3 + a])),
+        }
+    }
+
+    /// The lanes moved down by `K` (lane `i` holds lane `(i + K) % 4`).
+    #[inline(always)]
+    fn rot<const K: i32>(&self) -> Self {
+        Self {
+            lo: self.lo.map(F4::rot::<K>),
+            hi: self.hi.map(F4::rot::<K>),
+        }
+    }
+
+    /// Bit `i` set when lane `i` of `self` overlaps lane `i` of `o`.
+    #[inline(always)]
+    fn hits(&self, o: &Rows) -> u32 {
+        let mut m = self.lo[0].le(o.hi[0]).and(o.lo[0].le(self.hi[0]));
+        for a in 1..3 {
+            m = m.and(self.lo[a].le(o.hi[a])).and(o.lo[a].le(self.hi[a]));
+        }
+        m.bits()
+    }
+}
+
 /// The box of lane `lane` of `n` as two vectors (lane 3 zero), as [`prim_box`] gives.
 #[inline(always)]
 fn lane_box(n: &Node4, lane: usize) -> (F4, F4) {
@@ -87,6 +124,15 @@ fn prefetch_node(r4: &Ray4, i: u32) {
     let _ = (r4, i);
 }
 
+/// Number of tasks taken off the stack ahead of their turn, so that the lines they read are
+/// on their way while the tasks before them run.
+const WINDOW: usize = 8;
+
+/// Size of the four-wide tree beyond which the walk goes through the window: in a tree larger
+/// than a core's caches the tasks wait on memory; in a smaller one the window's bookkeeping
+/// costs more than it saves (10k boxes: 0.38 ms without, 0.43 with; 1M: 89 ms without, 79 with).
+const WINDOW_BYTES: usize = 1 << 20;
+
 /// The state of one self walk.
 struct Walk<'a, F> {
     t: &'a Bvh,
@@ -95,13 +141,56 @@ struct Walk<'a, F> {
     tasks: Vec<(u32, u32)>,
     /// Scratch stack of the primitive queries.
     qstack: Vec<u32>,
+    /// Whether tasks go through the prefetch window (large trees) rather than being prefetched
+    /// as they are pushed.
+    ahead: bool,
     f: F,
 }
 
 impl<F: FnMut(u32, u32)> Walk<'_, F> {
+    /// Pushes a task (prefetching its nodes now unless the window will).
+    #[inline(always)]
+    fn push(&mut self, t: (u32, u32)) {
+        if !self.ahead {
+            prefetch_node(self.r4, t.0);
+            if t.1 != t.0 {
+                prefetch_node(self.r4, t.1);
+            }
+        }
+        self.tasks.push(t);
+    }
+
     fn run(&mut self, start: (u32, u32)) {
         self.tasks.push(start);
-        while let Some((a, b)) = self.tasks.pop() {
+        if !self.ahead {
+            while let Some((a, b)) = self.tasks.pop() {
+                if a == b {
+                    self.node_self(a);
+                } else {
+                    self.node_pair(a, b);
+                }
+            }
+            return;
+        }
+        // The next `WINDOW` tasks, taken from the stack and prefetched ahead of their turn.
+        let mut window = [(0u32, 0u32); WINDOW];
+        let (mut head, mut len) = (0usize, 0usize);
+        loop {
+            while len < WINDOW {
+                let Some(t) = self.tasks.pop() else { break };
+                prefetch_node(self.r4, t.0);
+                if t.1 != t.0 {
+                    prefetch_node(self.r4, t.1);
+                }
+                window[(head + len) % WINDOW] = t;
+                len += 1;
+            }
+            if len == 0 {
+                return;
+            }
+            let (a, b) = window[head];
+            head = (head + 1) % WINDOW;
+            len -= 1;
             if a == b {
                 self.node_self(a);
             } else {
@@ -118,19 +207,20 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
         for i in 0..4 {
             let meta = n.meta[i];
             if meta == INTERIOR {
-                prefetch_node(r4, n.first[i]);
-                self.tasks.push((n.first[i], n.first[i]));
+                self.push((n.first[i], n.first[i]));
             } else if meta > 1 {
                 self.leaf_self(n.first[i] as usize, meta as usize);
             }
-            if i < 3 {
-                let mut m = Splat::lane(n, i).hits(n) & (0b1110 << i) & 0b1111;
-                while m != 0 {
-                    let j = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    self.lanes(n, i, n, j);
-                }
-            }
+        }
+        // Lane pairs `(i, i + 1)` (all four, cyclically) and `(i, i + 2)` (`i` = 0, 1): each
+        // pair of different lanes once.
+        let r = Rows::of(n);
+        let mut m = r.hits(&r.rot::<1>()) | (r.hits(&r.rot::<2>()) & 0b0011) << 4;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let i = k & 3;
+            self.lanes(n, i, n, (i + 1 + (k >> 2)) & 3);
         }
     }
 
@@ -139,13 +229,17 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
     fn node_pair(&mut self, a: u32, b: u32) {
         let r4 = self.r4;
         let (na, nb) = (r4.at(a as usize), r4.at(b as usize));
-        for i in 0..4 {
-            let mut m = Splat::lane(na, i).hits(nb);
-            while m != 0 {
-                let j = m.trailing_zeros() as usize;
-                m &= m - 1;
-                self.lanes(na, i, nb, j);
-            }
+        // Bit `4 * k + i`: lane `i` of `na` against lane `(i + k) % 4` of `nb`.
+        let (ra, rb) = (Rows::of(na), Rows::of(nb));
+        let mut m = ra.hits(&rb)
+            | ra.hits(&rb.rot::<1>()) << 4
+            | ra.hits(&rb.rot::<2>()) << 8
+            | ra.hits(&rb.rot::<3>()) << 12;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let i = k & 3;
+            self.lanes(na, i, nb, (i + (k >> 2)) & 3);
         }
     }
 
@@ -154,10 +248,7 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
     fn lanes(&mut self, na: &Node4, i: usize, nb: &Node4, j: usize) {
         match (na.meta[i] == INTERIOR, nb.meta[j] == INTERIOR) {
             (true, true) => {
-                let (x, y) = (na.first[i], nb.first[j]);
-                prefetch_node(self.r4, x);
-                prefetch_node(self.r4, y);
-                self.tasks.push((x, y));
+                self.push((na.first[i], nb.first[j]));
             }
             (false, true) => self.leaf_into(na, i, nb, j),
             (true, false) => self.leaf_into(nb, j, na, i),
@@ -285,6 +376,7 @@ pub(crate) fn self_pairs4(t: &Bvh, f: impl FnMut(u32, u32)) {
         r4,
         tasks: Vec::with_capacity(256),
         qstack: Vec::with_capacity(64),
+        ahead: std::mem::size_of_val(&r4.nodes[..]) > WINDOW_BYTES,
         f,
     };
     w.run((0, 0));
