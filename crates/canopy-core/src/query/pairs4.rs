@@ -371,13 +371,116 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
 /// Every overlapping pair of primitives of the non-empty tree `t`, once each, to `f`.
 pub(crate) fn self_pairs4(t: &Bvh, f: impl FnMut(u32, u32)) {
     let r4 = t.four_wide();
+    walk(t, std::mem::size_of_val(&r4.nodes[..]) > WINDOW_BYTES, f);
+}
+
+/// [`self_pairs4`] with the window on or off (`ahead`).
+fn walk(t: &Bvh, ahead: bool, f: impl FnMut(u32, u32)) {
     let mut w = Walk {
         t,
-        r4,
+        r4: t.four_wide(),
         tasks: Vec::with_capacity(256),
         qstack: Vec::with_capacity(64),
-        ahead: std::mem::size_of_val(&r4.nodes[..]) > WINDOW_BYTES,
+        ahead,
         f,
     };
     w.run((0, 0));
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::{Aabb, BuildOptions, Builder, Bvh};
+    use nalgebra::{Point3, Vector3};
+
+    /// A small deterministic generator (SplitMix64), uniform in `[lo, hi)`.
+    fn rng(seed: u64) -> impl FnMut(f32, f32) -> f32 {
+        let mut s = seed;
+        move |lo, hi| {
+            s = s.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = s;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            lo + (hi - lo) * ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
+    /// `n` boxes in a cube of side `side`, half-extents up to `h` (some of size zero, some
+    /// repeated).
+    fn boxes(n: usize, side: f32, h: f32, r: &mut impl FnMut(f32, f32) -> f32) -> Vec<Aabb> {
+        let mut v: Vec<Aabb> = (0..n)
+            .map(|i| {
+                let c = Point3::new(r(0.0, side), r(0.0, side), r(0.0, side));
+                let e = if i % 7 == 0 {
+                    Vector3::zeros()
+                } else {
+                    Vector3::new(r(0.0, h), r(0.0, h), r(0.0, h))
+                };
+                Aabb::from_center_half_extents(c, e)
+            })
+            .collect();
+        for i in (0..n).step_by(11) {
+            v[i] = v[i / 2];
+        }
+        v
+    }
+
+    fn sorted_pairs(t: &Bvh, ahead: bool) -> Vec<(u32, u32)> {
+        let mut v = Vec::new();
+        super::walk(t, ahead, |a, b| v.push((a, b)));
+        v.sort_unstable();
+        v
+    }
+
+    fn check(t: &Bvh, b: &[Aabb]) {
+        let n = b.len();
+        let mut expect = Vec::new();
+        for i in 0..n {
+            for j in i + 1..n {
+                if b[i].intersects(&b[j]) {
+                    expect.push((i as u32, j as u32));
+                }
+            }
+        }
+        assert_eq!(sorted_pairs(t, false), expect);
+        assert_eq!(sorted_pairs(t, true), expect);
+    }
+
+    #[test]
+    fn both_modes_match_brute_force() {
+        let mut r = rng(11);
+        for builder in [Builder::BinnedSah, Builder::Lbvh] {
+            for leaf in [1, 3, 8] {
+                for n in [1, 2, 5, 17, 300, 1500] {
+                    let b = boxes(n, (n as f32).cbrt() * 2.0, 1.0, &mut r);
+                    let options = BuildOptions {
+                        builder,
+                        max_leaf_size: leaf,
+                        ..Default::default()
+                    };
+                    let mut t = Bvh::build(&b, options).unwrap();
+                    check(&t, &b);
+                    // After a refit, the four-wide copy made above follows the new boxes.
+                    let b = boxes(n, (n as f32).cbrt() * 2.0, 1.0, &mut r);
+                    t.refit(&b).unwrap();
+                    check(&t, &b);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn large_tree_takes_the_window_and_matches_the_binary_walk() {
+        let mut r = rng(12);
+        let b = boxes(40_000, 70.0, 0.8, &mut r);
+        let t = Bvh::build(&b, BuildOptions::default()).unwrap();
+        assert!(std::mem::size_of_val(&t.four_wide().nodes[..]) > super::WINDOW_BYTES);
+        let mut got = Vec::new();
+        t.self_pairs(|a, b| got.push((a, b)));
+        got.sort_unstable();
+        assert!(got.windows(2).all(|w| w[0] != w[1]));
+        let mut expect = t.par_self_pairs();
+        expect.sort_unstable();
+        assert!(!expect.is_empty());
+        assert_eq!(got, expect);
+    }
 }
