@@ -1,12 +1,17 @@
 //! The walk of [`Bvh::self_pairs`]: the bounding volume test tree of the four-wide copy of the
 //! tree (`Ray4`, made on first use and shared with the ray casts, see `ray.rs`) against itself.
 //!
-//! A task is a pair of `Node4`s whose boxes overlap, or one `Node4` against itself. A node
-//! against itself tests each of its lanes against the later lanes; two nodes test each lane of
-//! the first against the four lanes of the second. Each such test is one box against four (one
-//! SSE comparison per face). Two overlapping interior lanes make a new task; a leaf lane that
-//! overlaps an interior lane becomes a query of each of the leaf's primitives down that
-//! subtree, made at once; two leaf lanes compare their primitives at once.
+//! Every `Node4` is taken against itself once, in reverse storage order (children are stored
+//! after their parent, so a subtree's nodes are mostly visited, and still in cache, just before
+//! its root): the pairs within its leaf lanes, and each pair of different lanes. Two
+//! overlapping interior lanes make a node-pair task, run at once from a stack (depth first):
+//! each lane of one node against the four lanes of the other. Lane tests are SSE tests of four
+//! boxes against four (a node's lanes against a rotation of the other's). Overlapping lane
+//! pairs are split by kind into bit masks, each kind with its own loop: two interior lanes push
+//! a task, two one-primitive leaves are reported, a leaf against an interior lane becomes a
+//! query of each of the leaf's primitives down that subtree, and two leaves compare their
+//! primitives. In a tree larger than the caches the tasks pass through a small window that
+//! prefetches their nodes a few tasks ahead.
 
 use super::ray::{Node4, Ray4, INTERIOR};
 use crate::build::f4::{overlap, prim_box, F4};
@@ -100,6 +105,33 @@ fn lane_box(n: &Node4, lane: usize) -> (F4, F4) {
     )
 }
 
+/// The 4-bit mask of the lanes `i` with `v[i] == x`.
+#[inline(always)]
+fn lanes_eq(v: &[u32; 4], x: u32) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{
+            _mm_castsi128_ps, _mm_cmpeq_epi32, _mm_loadu_si128, _mm_movemask_ps, _mm_set1_epi32,
+        };
+        // SAFETY: SSE2 is part of the x86_64 baseline; the load reads the 16 bytes of `v`.
+        unsafe {
+            let e = _mm_cmpeq_epi32(_mm_loadu_si128(v.as_ptr().cast()), _mm_set1_epi32(x as i32));
+            _mm_movemask_ps(_mm_castsi128_ps(e)) as u32
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        (0..4).fold(0, |m, i| m | ((v[i] == x) as u32) << i)
+    }
+}
+
+/// The 4-bit mask `l` with bit `i` moved to bit `(i + 4 - k) % 4`: bit `i` of the result is
+/// bit `(i + k) % 4` of `l`.
+#[inline(always)]
+fn rot4(l: u32, k: u32) -> u32 {
+    ((l >> k) | (l << (4 - k))) & 0b1111
+}
+
 /// Reports the pair of primitives `a` and `b` (different), smaller index first.
 #[inline(always)]
 fn report(a: u32, b: u32, f: &mut impl FnMut(u32, u32)) {
@@ -130,14 +162,15 @@ const WINDOW: usize = 8;
 
 /// Size of the four-wide tree beyond which the walk goes through the window: in a tree larger
 /// than a core's caches the tasks wait on memory; in a smaller one the window's bookkeeping
-/// costs more than it saves (10k boxes: 0.38 ms without, 0.43 with; 1M: 89 ms without, 79 with).
+/// costs more than it saves (10k boxes: 0.37 ms without, 0.40 with; 100k: 5.9 either way; 1M:
+/// 73 ms without, 62 with).
 const WINDOW_BYTES: usize = 1 << 20;
 
 /// The state of one self walk.
 struct Walk<'a, F> {
     t: &'a Bvh,
     r4: &'a Ray4,
-    /// Node-pair tasks (`a == b`: node `a` against itself).
+    /// Node-pair tasks: two different nodes whose boxes overlap.
     tasks: Vec<(u32, u32)>,
     /// Scratch stack of the primitive queries.
     qstack: Vec<u32>,
@@ -148,41 +181,44 @@ struct Walk<'a, F> {
 }
 
 impl<F: FnMut(u32, u32)> Walk<'_, F> {
-    /// Pushes a task (prefetching its nodes now unless the window will).
+    /// Pushes the task of nodes `a` and `b` (prefetching them now unless the window will).
     #[inline(always)]
-    fn push(&mut self, t: (u32, u32)) {
+    fn push(&mut self, a: u32, b: u32) {
         if !self.ahead {
-            prefetch_node(self.r4, t.0);
-            if t.1 != t.0 {
-                prefetch_node(self.r4, t.1);
-            }
+            prefetch_node(self.r4, a);
+            prefetch_node(self.r4, b);
         }
-        self.tasks.push(t);
+        self.tasks.push((a, b));
     }
 
-    fn run(&mut self, start: (u32, u32)) {
-        self.tasks.push(start);
-        if !self.ahead {
-            while let Some((a, b)) = self.tasks.pop() {
-                if a == b {
-                    self.node_self(a);
-                } else {
+    /// Every node against itself, in storage order, each followed by the node-pair tasks it
+    /// made.
+    fn run(&mut self) {
+        for k in (0..self.r4.nodes.len()).rev() {
+            self.node_self(k);
+            if self.ahead {
+                self.drain_ahead();
+            } else {
+                while let Some((a, b)) = self.tasks.pop() {
                     self.node_pair(a, b);
                 }
             }
-            return;
         }
-        // The next `WINDOW` tasks, taken from the stack and prefetched ahead of their turn.
+    }
+
+    /// Runs the tasks on the stack (and those they make) through the prefetch window: the
+    /// next `WINDOW` tasks are taken off the stack and prefetched ahead of their turn.
+    fn drain_ahead(&mut self) {
         let mut window = [(0u32, 0u32); WINDOW];
         let (mut head, mut len) = (0usize, 0usize);
         loop {
             while len < WINDOW {
-                let Some(t) = self.tasks.pop() else { break };
-                prefetch_node(self.r4, t.0);
-                if t.1 != t.0 {
-                    prefetch_node(self.r4, t.1);
-                }
-                window[(head + len) % WINDOW] = t;
+                let Some((a, b)) = self.tasks.pop() else {
+                    break;
+                };
+                prefetch_node(self.r4, a);
+                prefetch_node(self.r4, b);
+                window[(head + len) % WINDOW] = (a, b);
                 len += 1;
             }
             if len == 0 {
@@ -191,37 +227,37 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
             let (a, b) = window[head];
             head = (head + 1) % WINDOW;
             len -= 1;
-            if a == b {
-                self.node_self(a);
-            } else {
-                self.node_pair(a, b);
-            }
+            self.node_pair(a, b);
         }
     }
 
-    /// Node `k` against itself.
+    /// Node `k` against itself: the pairs within its leaf lanes, and each pair of different
+    /// lanes (their subtrees' pairs).
     #[inline(always)]
-    fn node_self(&mut self, k: u32) {
-        let r4 = self.r4;
-        let n = r4.at(k as usize);
+    fn node_self(&mut self, k: usize) {
+        let n = self.r4.at(k);
         for i in 0..4 {
             let meta = n.meta[i];
-            if meta == INTERIOR {
-                self.push((n.first[i], n.first[i]));
-            } else if meta > 1 {
+            if meta > 1 && meta != INTERIOR {
                 self.leaf_self(n.first[i] as usize, meta as usize);
             }
         }
-        // Lane pairs `(i, i + 1)` (all four, cyclically) and `(i, i + 2)` (`i` = 0, 1): each
-        // pair of different lanes once.
+        // Lane pairs `(i, i + 1)` (all four, cyclically; bits 0..4) and `(i, i + 2)` (`i` = 0,
+        // 1; bits 4..6): each pair of different lanes once.
         let r = Rows::of(n);
-        let mut m = r.hits(&r.rot::<1>()) | (r.hits(&r.rot::<2>()) & 0b0011) << 4;
-        while m != 0 {
-            let k = m.trailing_zeros() as usize;
-            m &= m - 1;
-            let i = k & 3;
-            self.lanes(n, i, n, (i + 1 + (k >> 2)) & 3);
-        }
+        let m = r.hits(&r.rot::<1>()) | (r.hits(&r.rot::<2>()) & 0b0011) << 4;
+        let (inner, single) = (lanes_eq(&n.meta, INTERIOR), lanes_eq(&n.meta, 1));
+        let spread = |l: u32| l | l << 4;
+        let other = |l: u32| rot4(l, 1) | rot4(l, 2) << 4;
+        let j_of = |k: usize| (k + 1 + (k >> 2)) & 3;
+        self.dispatch(
+            n,
+            n,
+            m,
+            spread(inner) & other(inner),
+            spread(single) & other(single),
+            j_of,
+        );
     }
 
     /// Nodes `a` and `b` (different, boxes overlapping) against each other.
@@ -231,15 +267,55 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
         let (na, nb) = (r4.at(a as usize), r4.at(b as usize));
         // Bit `4 * k + i`: lane `i` of `na` against lane `(i + k) % 4` of `nb`.
         let (ra, rb) = (Rows::of(na), Rows::of(nb));
-        let mut m = ra.hits(&rb)
+        let m = ra.hits(&rb)
             | ra.hits(&rb.rot::<1>()) << 4
             | ra.hits(&rb.rot::<2>()) << 8
             | ra.hits(&rb.rot::<3>()) << 12;
-        while m != 0 {
-            let k = m.trailing_zeros() as usize;
-            m &= m - 1;
-            let i = k & 3;
-            self.lanes(na, i, nb, (i + (k >> 2)) & 3);
+        let spread = |l: u32| l * 0x1111;
+        let other = |l: u32| l | rot4(l, 1) << 4 | rot4(l, 2) << 8 | rot4(l, 3) << 12;
+        let j_of = |k: usize| (k + (k >> 2)) & 3;
+        self.dispatch(
+            na,
+            nb,
+            m,
+            spread(lanes_eq(&na.meta, INTERIOR)) & other(lanes_eq(&nb.meta, INTERIOR)),
+            spread(lanes_eq(&na.meta, 1)) & other(lanes_eq(&nb.meta, 1)),
+            j_of,
+        );
+    }
+
+    /// The overlapping lane pairs `m` of `na` and `nb`: bit `k` is lane `k % 4` of `na`
+    /// against lane `j_of(k)` of `nb`; `inner` marks the pairs of two interior lanes, `single`
+    /// those of two one-primitive leaves. Each kind has a loop of its own, so that the kind of
+    /// a pair is never a branch.
+    #[inline(always)]
+    fn dispatch(
+        &mut self,
+        na: &Node4,
+        nb: &Node4,
+        m: u32,
+        inner: u32,
+        single: u32,
+        j_of: impl Fn(usize) -> usize,
+    ) {
+        let mut both = m & inner;
+        while both != 0 {
+            let k = both.trailing_zeros() as usize;
+            both &= both - 1;
+            self.push(na.first[k & 3], nb.first[j_of(k)]);
+        }
+        let mut ones = m & single;
+        while ones != 0 {
+            let k = ones.trailing_zeros() as usize;
+            ones &= ones - 1;
+            // One-primitive leaves have their primitive's box, seen to overlap.
+            report(na.first[k & 3], nb.first[j_of(k)], &mut self.f);
+        }
+        let mut rest = m & !(inner | single);
+        while rest != 0 {
+            let k = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            self.lanes(na, k & 3, nb, j_of(k));
         }
     }
 
@@ -248,7 +324,7 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
     fn lanes(&mut self, na: &Node4, i: usize, nb: &Node4, j: usize) {
         match (na.meta[i] == INTERIOR, nb.meta[j] == INTERIOR) {
             (true, true) => {
-                self.push((na.first[i], nb.first[j]));
+                self.push(na.first[i], nb.first[j]);
             }
             (false, true) => self.leaf_into(na, i, nb, j),
             (true, false) => self.leaf_into(nb, j, na, i),
@@ -384,7 +460,7 @@ fn walk(t: &Bvh, ahead: bool, f: impl FnMut(u32, u32)) {
         ahead,
         f,
     };
-    w.run((0, 0));
+    w.run();
 }
 
 #[cfg(test)]
