@@ -6,12 +6,11 @@
 //! its root): the pairs within its leaf lanes, and each pair of different lanes. Two
 //! overlapping interior lanes make a node-pair task, run at once from a stack (depth first):
 //! each lane of one node against the four lanes of the other. Lane tests are SSE tests of four
-//! boxes against four (a node's lanes against a rotation of the other's). Overlapping lane
-//! pairs are split by kind into bit masks, each kind with its own loop: two interior lanes push
-//! a task, two one-primitive leaves are reported, a leaf against an interior lane becomes a
-//! query of each of the leaf's primitives down that subtree, and two leaves compare their
-//! primitives. In a tree larger than the caches the tasks pass through a small window that
-//! prefetches their nodes a few tasks ahead.
+//! boxes against four (a node's lanes against a rotation of the other's). Of the overlapping
+//! lane pairs, two interior lanes push a task, two one-primitive leaves are reported, a leaf
+//! against an interior lane becomes a query of each of the leaf's primitives down that
+//! subtree, and two leaves compare their primitives. In a tree larger than the caches the
+//! tasks pass through a small window that prefetches their nodes a few tasks ahead.
 
 use super::ray::{Node4, Ray4, INTERIOR};
 use crate::build::f4::{overlap, prim_box, F4};
@@ -103,33 +102,6 @@ fn lane_box(n: &Node4, lane: usize) -> (F4, F4) {
         F4::new(n.b[0][lane], n.b[1][lane], n.b[2][lane], 0.0),
         F4::new(n.b[3][lane], n.b[4][lane], n.b[5][lane], 0.0),
     )
-}
-
-/// The 4-bit mask of the lanes `i` with `v[i] == x`.
-#[inline(always)]
-fn lanes_eq(v: &[u32; 4], x: u32) -> u32 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{
-            _mm_castsi128_ps, _mm_cmpeq_epi32, _mm_loadu_si128, _mm_movemask_ps, _mm_set1_epi32,
-        };
-        // SAFETY: SSE2 is part of the x86_64 baseline; the load reads the 16 bytes of `v`.
-        unsafe {
-            let e = _mm_cmpeq_epi32(_mm_loadu_si128(v.as_ptr().cast()), _mm_set1_epi32(x as i32));
-            _mm_movemask_ps(_mm_castsi128_ps(e)) as u32
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        (0..4).fold(0, |m, i| m | ((v[i] == x) as u32) << i)
-    }
-}
-
-/// The 4-bit mask `l` with bit `i` moved to bit `(i + 4 - k) % 4`: bit `i` of the result is
-/// bit `(i + k) % 4` of `l`.
-#[inline(always)]
-fn rot4(l: u32, k: u32) -> u32 {
-    ((l >> k) | (l << (4 - k))) & 0b1111
 }
 
 /// Reports the pair of primitives `a` and `b` (different), smaller index first.
@@ -246,18 +218,7 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
         // 1; bits 4..6): each pair of different lanes once.
         let r = Rows::of(n);
         let m = r.hits(&r.rot::<1>()) | (r.hits(&r.rot::<2>()) & 0b0011) << 4;
-        let (inner, single) = (lanes_eq(&n.meta, INTERIOR), lanes_eq(&n.meta, 1));
-        let spread = |l: u32| l | l << 4;
-        let other = |l: u32| rot4(l, 1) | rot4(l, 2) << 4;
-        let j_of = |k: usize| (k + 1 + (k >> 2)) & 3;
-        self.dispatch(
-            n,
-            n,
-            m,
-            spread(inner) & other(inner),
-            spread(single) & other(single),
-            j_of,
-        );
+        self.dispatch(n, n, m, |k| (k + 1 + (k >> 2)) & 3);
     }
 
     /// Nodes `a` and `b` (different, boxes overlapping) against each other.
@@ -271,50 +232,16 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
             | ra.hits(&rb.rot::<1>()) << 4
             | ra.hits(&rb.rot::<2>()) << 8
             | ra.hits(&rb.rot::<3>()) << 12;
-        let spread = |l: u32| l * 0x1111;
-        let other = |l: u32| l | rot4(l, 1) << 4 | rot4(l, 2) << 8 | rot4(l, 3) << 12;
-        let j_of = |k: usize| (k + (k >> 2)) & 3;
-        self.dispatch(
-            na,
-            nb,
-            m,
-            spread(lanes_eq(&na.meta, INTERIOR)) & other(lanes_eq(&nb.meta, INTERIOR)),
-            spread(lanes_eq(&na.meta, 1)) & other(lanes_eq(&nb.meta, 1)),
-            j_of,
-        );
+        self.dispatch(na, nb, m, |k| (k + (k >> 2)) & 3);
     }
 
     /// The overlapping lane pairs `m` of `na` and `nb`: bit `k` is lane `k % 4` of `na`
-    /// against lane `j_of(k)` of `nb`; `inner` marks the pairs of two interior lanes, `single`
-    /// those of two one-primitive leaves. Each kind has a loop of its own, so that the kind of
-    /// a pair is never a branch.
+    /// against lane `j_of(k)` of `nb`.
     #[inline(always)]
-    fn dispatch(
-        &mut self,
-        na: &Node4,
-        nb: &Node4,
-        m: u32,
-        inner: u32,
-        single: u32,
-        j_of: impl Fn(usize) -> usize,
-    ) {
-        let mut both = m & inner;
-        while both != 0 {
-            let k = both.trailing_zeros() as usize;
-            both &= both - 1;
-            self.push(na.first[k & 3], nb.first[j_of(k)]);
-        }
-        let mut ones = m & single;
-        while ones != 0 {
-            let k = ones.trailing_zeros() as usize;
-            ones &= ones - 1;
-            // One-primitive leaves have their primitive's box, seen to overlap.
-            report(na.first[k & 3], nb.first[j_of(k)], &mut self.f);
-        }
-        let mut rest = m & !(inner | single);
-        while rest != 0 {
-            let k = rest.trailing_zeros() as usize;
-            rest &= rest - 1;
+    fn dispatch(&mut self, na: &Node4, nb: &Node4, mut m: u32, j_of: impl Fn(usize) -> usize) {
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
             self.lanes(na, k & 3, nb, j_of(k));
         }
     }
