@@ -8,12 +8,11 @@
 //! the root task breadth-first into a fixed number of independent tasks, run those on rayon, and
 //! concatenate the results in task order.
 //!
-//! [`Bvh::self_pairs`] walks the four-wide copy of the tree instead (see `pairs4.rs`). The
-//! serial unmarked tree-vs-tree walk and the parallel self query run on the tree's wide array
-//! (both children of a node in one cache line); the others on the nodes. The parallel self
-//! query has a walk of its own: tasks are pairs of references to wide entries, pushed without
-//! branches (every candidate is written, the stack length grows by the box test's result), and
-//! the children line of a right child is prefetched as its tasks are pushed.
+//! The plain self queries, [`Bvh::self_pairs`] and [`Bvh::par_self_pairs`], walk the
+//! four-wide copy of the tree instead (see `pairs4.rs`; the parallel one cuts the nodes into a
+//! fixed number of ranges). The serial unmarked tree-vs-tree walk (also taken by the marked
+//! self query when its marks were made for another tree) runs on the tree's wide array (both
+//! children of a node in one cache line); the others on the nodes.
 //!
 //! The `_marked` variants report only pairs with at least one *marked* primitive (a broadphase
 //! marks the proxies that moved). [`PairMarks`] summarises the marks per node, so whole
@@ -469,146 +468,6 @@ fn wwalk<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, f: &mut impl FnMut(u
     }
 }
 
-/// `true` when the boxes of two nodes (or wide entries) overlap: one mask, one move.
-#[inline(always)]
-fn entries_overlap(a: &Node, b: &Node) -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_and_ps, _mm_cmple_ps, _mm_movemask_ps};
-        let (alo, ahi) = node_box(a);
-        let (blo, bhi) = node_box(b);
-        // SAFETY: SSE is part of the x86_64 baseline.
-        unsafe {
-            _mm_movemask_ps(_mm_and_ps(
-                _mm_cmple_ps(alo.0, bhi.0),
-                _mm_cmple_ps(blo.0, ahi.0),
-            )) & 7
-                == 7
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        nodes_overlap(a, b)
-    }
-}
-
-/// A hint to start loading the line holding the children of entry `e` (a right child, whose
-/// children lie away from its parent's line; left children's follow it) before its tasks are
-/// popped. For a leaf the address means nothing, and a prefetch never faults.
-#[inline(always)]
-fn prefetch_children(w: &[Wide], e: &Node) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let p = w.as_ptr().wrapping_add(e.first as usize).cast::<i8>();
-        // SAFETY: a prefetch is only a hint: it never faults and never changes memory, whatever
-        // the address; SSE is part of the x86_64 baseline.
-        unsafe { _mm_prefetch::<_MM_HINT_T0>(p) };
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (w, e);
-}
-
-/// A task of the self walk: two wide entries whose boxes overlap, or one entry twice (its
-/// subtree against itself).
-type EntryPair<'a> = (&'a Node, &'a Node);
-
-/// The stack of the self walk. Each expansion reserves room for all the tasks it may make,
-/// then writes every candidate and keeps it only when it is a task (`len += keep`), so the
-/// box tests feed no branch.
-struct PairStack<'a> {
-    v: Vec<EntryPair<'a>>,
-}
-
-impl<'a> PairStack<'a> {
-    /// Pushes the candidates `t[i]` for which `keep[i]`.
-    #[inline(always)]
-    fn push_if<const N: usize>(&mut self, t: [EntryPair<'a>; N], keep: [bool; N]) {
-        self.v.reserve(N);
-        let mut len = self.v.len();
-        let p = self.v.as_mut_ptr();
-        for i in 0..N {
-            // SAFETY: `reserve(N)` made room for `N` more tasks past the original length, and
-            // `len` grows by at most one per write; tasks are `Copy` (nothing to drop).
-            unsafe { p.add(len).write(t[i]) };
-            len += keep[i] as usize;
-        }
-        // SAFETY: the first `len` slots are initialised (see above) and within capacity.
-        unsafe { self.v.set_len(len) };
-    }
-}
-
-/// The unmarked self walk of [`Bvh::par_self_pairs`] from task `start` (`(root, root)` for the
-/// whole tree; see [`EntryPair`]): the tasks of [`wwalk`] for one tree, held as references to their two entries (nothing to look
-/// up on a pop), and pushed without branches (see [`PairStack`]). Two one-primitive leaves
-/// found overlapping are pushed like any task and reported when popped.
-fn self_walk<'a>(t: &'a Bvh, start: EntryPair<'a>, f: &mut impl FnMut(u32, u32)) {
-    let w = &t.wide[..];
-    let mut stack = PairStack {
-        v: Vec::with_capacity(256),
-    };
-    let mut qstack: Vec<u32> = Vec::with_capacity(64);
-    stack.v.push(start);
-    while let Some((a, b)) = stack.v.pop() {
-        if std::ptr::eq(a, b) {
-            if a.is_leaf() {
-                leaf_pairs::<true>(t, a, t, a, f);
-                continue;
-            }
-            let [l, r] = &wide_at(w, a.first as usize).0;
-            prefetch_children(w, r);
-            // A leaf of one primitive has no pairs of its own.
-            stack.push_if(
-                [(r, r), (l, l), (l, r)],
-                [r.count != 1, l.count != 1, entries_overlap(l, r)],
-            );
-            continue;
-        }
-        match (a.count, b.count) {
-            (0, 0) => {
-                let [a0, a1] = &wide_at(w, a.first as usize).0;
-                let [b0, b1] = &wide_at(w, b.first as usize).0;
-                prefetch_children(w, a1);
-                prefetch_children(w, b1);
-                stack.push_if(
-                    [(a1, b1), (a1, b0), (a0, b1), (a0, b0)],
-                    [
-                        entries_overlap(a1, b1),
-                        entries_overlap(a1, b0),
-                        entries_overlap(a0, b1),
-                        entries_overlap(a0, b0),
-                    ],
-                );
-            }
-            (1, 1) => {
-                // One-primitive leaves have their primitive's box, seen to overlap.
-                let (ip, iq) = (
-                    t.prim_indices[a.first as usize],
-                    t.prim_indices[b.first as usize],
-                );
-                report::<true, false>(ip, iq, f);
-            }
-            (1, 0) => wprim_query::<true, false>(t, a, t, b.first, &mut qstack, f),
-            (0, 1) => wprim_query::<true, false>(t, b, t, a.first, &mut qstack, f),
-            (_, 0) => {
-                let [b0, b1] = &wide_at(w, b.first as usize).0;
-                stack.push_if(
-                    [(a, b1), (a, b0)],
-                    [entries_overlap(a, b1), entries_overlap(a, b0)],
-                );
-            }
-            (0, _) => {
-                let [a0, a1] = &wide_at(w, a.first as usize).0;
-                stack.push_if(
-                    [(a1, b), (a0, b)],
-                    [entries_overlap(a1, b), entries_overlap(a0, b)],
-                );
-            }
-            _ => leaf_pairs::<true>(t, a, t, b, f),
-        }
-    }
-}
-
 /// Two overlapping entries found by the walk: reported at once when both are leaves of one
 /// primitive (whose boxes are those primitives' boxes), else pushed as a task.
 #[inline(always)]
@@ -706,104 +565,6 @@ fn wprim_query<const SELF: bool, const SWAP: bool>(
             None => return,
         }
     }
-}
-
-/// The tasks of the self walk of `t` (not empty) expanded breadth first from the root until
-/// there are at least `target` (fewer when the tree runs out of nodes): each task is expanded
-/// as [`self_walk`] would, except that a one-primitive leaf against a subtree splits the
-/// subtree like any other leaf (the same pairs). Depends only on the tree.
-fn split_self_tasks(t: &Bvh, target: usize) -> Vec<EntryPair<'_>> {
-    let w = &t.wide[..];
-    let root = &w[0].0[0];
-    let mut tasks = vec![(root, root)];
-    while tasks.len() < target {
-        let mut next = Vec::with_capacity(tasks.len() * 4);
-        let mut grew = false;
-        for &(a, b) in &tasks {
-            if std::ptr::eq(a, b) {
-                if a.is_leaf() {
-                    next.push((a, b));
-                    continue;
-                }
-                let [l, r] = &wide_at(w, a.first as usize).0;
-                if r.count != 1 {
-                    next.push((r, r));
-                }
-                if l.count != 1 {
-                    next.push((l, l));
-                }
-                if entries_overlap(l, r) {
-                    next.push((l, r));
-                }
-                grew = true;
-                continue;
-            }
-            match (a.is_leaf(), b.is_leaf()) {
-                (true, true) => next.push((a, b)),
-                (false, false) => {
-                    let [a0, a1] = &wide_at(w, a.first as usize).0;
-                    let [b0, b1] = &wide_at(w, b.first as usize).0;
-                    for (x, y) in [(a1, b1), (a1, b0), (a0, b1), (a0, b0)] {
-                        if entries_overlap(x, y) {
-                            next.push((x, y));
-                        }
-                    }
-                    grew = true;
-                }
-                (true, false) => {
-                    let [b0, b1] = &wide_at(w, b.first as usize).0;
-                    for y in [b1, b0] {
-                        if entries_overlap(a, y) {
-                            next.push((a, y));
-                        }
-                    }
-                    grew = true;
-                }
-                (false, true) => {
-                    let [a0, a1] = &wide_at(w, a.first as usize).0;
-                    for x in [a1, a0] {
-                        if entries_overlap(x, b) {
-                            next.push((x, b));
-                        }
-                    }
-                    grew = true;
-                }
-            }
-        }
-        tasks = next;
-        if !grew {
-            break;
-        }
-    }
-    tasks
-}
-
-/// [`Bvh::par_self_pairs`] of a non-empty tree: the tasks of [`split_self_tasks`], each walked
-/// by [`self_walk`] (on rayon when the pool has more than one thread), results concatenated in
-/// task order.
-fn par_self_walk(t: &Bvh) -> Vec<(u32, u32)> {
-    let tasks = split_self_tasks(t, PARALLEL_TASKS);
-    if rayon::current_num_threads() == 1 {
-        // Same tasks in the same order, without the cost of rayon's collection.
-        let mut out = Vec::with_capacity(t.len());
-        for &task in &tasks {
-            self_walk(t, task, &mut |a, b| out.push((a, b)));
-        }
-        return out;
-    }
-    let parts: Vec<Vec<(u32, u32)>> = tasks
-        .par_iter()
-        .map(|&task| {
-            let mut v = Vec::new();
-            self_walk(t, task, &mut |a, b| v.push((a, b)));
-            v
-        })
-        .collect();
-    let mut out = Vec::with_capacity(parts.iter().map(Vec::len).sum());
-    for p in parts {
-        out.extend_from_slice(&p);
-    }
-    out
 }
 
 /// Breadth-first expansion of `start` into at least `target` tasks (fewer when the trees run
@@ -910,7 +671,7 @@ impl Bvh {
         if self.wide.is_empty() {
             return Vec::new();
         }
-        par_self_walk(self)
+        super::pairs4::par_self_pairs4(self, PARALLEL_TASKS)
     }
 
     /// Calls `f(a, b)` for every primitive `a` of `self` and `b` of `other` whose boxes

@@ -15,6 +15,7 @@
 use super::ray::{Node4, Ray4, INTERIOR};
 use crate::build::f4::{overlap, prim_box, F4};
 use crate::bvh::{Bvh, PrimBounds};
+use rayon::prelude::*;
 
 /// One box in every lane, to test against the four lanes of a [`Node4`].
 #[derive(Clone, Copy)]
@@ -163,10 +164,10 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
         self.tasks.push((a, b));
     }
 
-    /// Every node against itself, in storage order, each followed by the node-pair tasks it
-    /// made.
-    fn run(&mut self) {
-        for k in (0..self.r4.nodes.len()).rev() {
+    /// Every node of `nodes` against itself, in reverse storage order, each followed by the
+    /// node-pair tasks it made.
+    fn run(&mut self, nodes: std::ops::Range<usize>) {
+        for k in nodes.rev() {
             self.node_self(k);
             if self.ahead {
                 self.drain_ahead();
@@ -374,11 +375,48 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
 /// Every overlapping pair of primitives of the non-empty tree `t`, once each, to `f`.
 pub(crate) fn self_pairs4(t: &Bvh, f: impl FnMut(u32, u32)) {
     let r4 = t.four_wide();
-    walk(t, std::mem::size_of_val(&r4.nodes[..]) > WINDOW_BYTES, f);
+    walk(t, large(r4), 0..r4.nodes.len(), f);
 }
 
-/// [`self_pairs4`] with the window on or off (`ahead`).
-fn walk(t: &Bvh, ahead: bool, f: impl FnMut(u32, u32)) {
+/// The pairs of [`self_pairs4`] in a `Vec`, found on the current rayon pool: the nodes are cut
+/// into `tasks` ranges (fewer in a small tree), walked independently and concatenated from the
+/// last range to the first, which is the serial order whatever the thread count.
+pub(crate) fn par_self_pairs4(t: &Bvh, tasks: usize) -> Vec<(u32, u32)> {
+    let r4 = t.four_wide();
+    let (n, ahead) = (r4.nodes.len(), large(r4));
+    if rayon::current_num_threads() == 1 {
+        let mut out = Vec::with_capacity(t.len());
+        walk(t, ahead, 0..n, |a, b| out.push((a, b)));
+        return out;
+    }
+    let tasks = tasks.clamp(1, n);
+    let parts: Vec<Vec<(u32, u32)>> = (0..tasks)
+        .into_par_iter()
+        .map(|c| {
+            // Range `c` from the top: nodes `n * (tasks - 1 - c) / tasks ..`.
+            let cut = |i: usize| (n as u64 * i as u64 / tasks as u64) as usize;
+            let mut v = Vec::new();
+            walk(t, ahead, cut(tasks - 1 - c)..cut(tasks - c), |a, b| {
+                v.push((a, b))
+            });
+            v
+        })
+        .collect();
+    let mut out = Vec::with_capacity(parts.iter().map(Vec::len).sum());
+    for p in parts {
+        out.extend_from_slice(&p);
+    }
+    out
+}
+
+/// Whether a walk of `r4` goes through the prefetch window.
+fn large(r4: &Ray4) -> bool {
+    std::mem::size_of_val(&r4.nodes[..]) > WINDOW_BYTES
+}
+
+/// The pairs found from the nodes `nodes` of `t` (all of them: [`self_pairs4`]), with the
+/// window on or off (`ahead`).
+fn walk(t: &Bvh, ahead: bool, nodes: std::ops::Range<usize>, f: impl FnMut(u32, u32)) {
     let mut w = Walk {
         t,
         r4: t.four_wide(),
@@ -387,7 +425,7 @@ fn walk(t: &Bvh, ahead: bool, f: impl FnMut(u32, u32)) {
         ahead,
         f,
     };
-    w.run();
+    w.run(nodes);
 }
 
 #[cfg(test)]
@@ -429,7 +467,9 @@ mod tests {
 
     fn sorted_pairs(t: &Bvh, ahead: bool) -> Vec<(u32, u32)> {
         let mut v = Vec::new();
-        super::walk(t, ahead, |a, b| v.push((a, b)));
+        super::walk(t, ahead, 0..t.four_wide().nodes.len(), |a, b| {
+            v.push((a, b))
+        });
         v.sort_unstable();
         v
     }
@@ -476,14 +516,51 @@ mod tests {
         let mut r = rng(12);
         let b = boxes(40_000, 70.0, 0.8, &mut r);
         let t = Bvh::build(&b, BuildOptions::default()).unwrap();
-        assert!(std::mem::size_of_val(&t.four_wide().nodes[..]) > super::WINDOW_BYTES);
-        let mut got = Vec::new();
-        t.self_pairs(|a, b| got.push((a, b)));
+        assert!(super::large(t.four_wide()));
+        let mut serial = Vec::new();
+        t.self_pairs(|a, b| serial.push((a, b)));
+        // Same order on one thread and on several.
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let four = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .unwrap();
+        let par1 = one.install(|| t.par_self_pairs());
+        assert_eq!(par1, four.install(|| t.par_self_pairs()));
+        assert_eq!(par1, serial);
+        let mut got = serial;
         got.sort_unstable();
         assert!(got.windows(2).all(|w| w[0] != w[1]));
-        let mut expect = t.par_self_pairs();
+        // The binary walk on the wide array: marks made for another tree mean "all marked".
+        let mut expect = Vec::new();
+        t.self_pairs_marked(&crate::PairMarks::default(), |a, b| expect.push((a, b)));
         expect.sort_unstable();
         assert!(!expect.is_empty());
         assert_eq!(got, expect);
+    }
+
+    #[test]
+    fn parallel_order_does_not_depend_on_the_thread_count() {
+        let mut r = rng(13);
+        for n in [1, 2, 40, 700] {
+            let b = boxes(n, (n as f32).cbrt() * 2.0, 1.0, &mut r);
+            let t = Bvh::build(&b, BuildOptions::default()).unwrap();
+            let mut serial = Vec::new();
+            t.self_pairs(|a, b| serial.push((a, b)));
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                assert_eq!(pool.install(|| t.par_self_pairs()), serial);
+                for tasks in [1, 3, 256, 10_000] {
+                    let got = pool.install(|| super::par_self_pairs4(&t, tasks));
+                    assert_eq!(got, serial);
+                }
+            }
+        }
     }
 }
