@@ -111,27 +111,36 @@ fn report(a: u32, b: u32, f: &mut impl FnMut(u32, u32)) {
     f(a.min(b), a.max(b));
 }
 
-/// A hint to start loading `Node4` `i` (both of its lines); never faults.
+/// A hint to start loading the cache line holding `p`; never faults.
 #[inline(always)]
-fn prefetch_node(r4: &Ray4, i: u32) {
+fn prefetch<T>(p: *const T) {
     #[cfg(target_arch = "x86_64")]
-    {
+    // SAFETY: a prefetch is only a hint: it never faults and never changes memory, whatever
+    // the address; SSE is part of the x86_64 baseline.
+    unsafe {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let p = r4.nodes.as_ptr().wrapping_add(i as usize).cast::<i8>();
-        // SAFETY: a prefetch is only a hint: it never faults and never changes memory, whatever
-        // the address; SSE is part of the x86_64 baseline.
-        unsafe {
-            _mm_prefetch::<_MM_HINT_T0>(p);
-            _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64));
-        }
+        _mm_prefetch::<_MM_HINT_T0>(p.cast());
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = (r4, i);
+    let _ = p;
+}
+
+/// A hint to start loading `Node4` `i` (both of its lines).
+#[inline(always)]
+fn prefetch_node(r4: &Ray4, i: u32) {
+    let p = r4.nodes.as_ptr().wrapping_add(i as usize).cast::<u8>();
+    prefetch(p);
+    prefetch(p.wrapping_add(64));
 }
 
 /// Number of tasks taken off the stack ahead of their turn, so that the lines they read are
 /// on their way while the tasks before them run.
 const WINDOW: usize = 8;
+
+/// How many nodes ahead of its turn in [`Walk::run`] a node's multi-primitive leaves are
+/// prefetched (in a tree that takes the window; 100k boxes: 5.5 -> 5.3 ms; in a small tree
+/// it only costs instructions).
+const LEAF_AHEAD: usize = 4;
 
 /// Size of the four-wide tree beyond which the walk goes through the window: in a tree larger
 /// than a core's caches the tasks wait on memory; in a smaller one the window's bookkeeping
@@ -167,7 +176,11 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
     /// Every node of `nodes` against itself, in reverse storage order, each followed by the
     /// node-pair tasks it made.
     fn run(&mut self, nodes: std::ops::Range<usize>) {
+        let start = nodes.start;
         for k in nodes.rev() {
+            if self.ahead && k >= start + LEAF_AHEAD {
+                self.prefetch_leaves(k - LEAF_AHEAD);
+            }
             self.node_self(k);
             if self.ahead {
                 self.drain_ahead();
@@ -175,6 +188,24 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
                 while let Some((a, b)) = self.tasks.pop() {
                     self.node_pair(a, b);
                 }
+            }
+        }
+    }
+
+    /// Starts loading the first primitive box of each leaf lane of node `k` with more than one
+    /// primitive, which [`Walk::node_self`] will read (the walk reaches `k` `LEAF_AHEAD` nodes
+    /// later).
+    #[inline(always)]
+    fn prefetch_leaves(&self, k: usize) {
+        let n = self.r4.at(k);
+        for i in 0..4 {
+            if n.meta[i] > 1 && n.meta[i] != INTERIOR {
+                prefetch(
+                    self.t
+                        .prim_bounds
+                        .as_ptr()
+                        .wrapping_add(n.first[i] as usize),
+                );
             }
         }
     }
