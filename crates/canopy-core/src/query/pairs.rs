@@ -632,6 +632,10 @@ fn par_walk<const SELF: bool, M1: Mask, M2: Mask>(
 impl Bvh {
     /// Calls `f(a, b)` once for every pair of primitives whose boxes overlap, with `a < b`.
     ///
+    /// The walk runs on the tree's four-wide copy, which the first such query (or ray cast)
+    /// after a build makes and keeps (refits update it): that first call costs one to two
+    /// walks more.
+    ///
     /// ```
     /// use canopy_core::{Aabb, Bvh, BuildOptions};
     /// let boxes: Vec<Aabb> = (0..10)
