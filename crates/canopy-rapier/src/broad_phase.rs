@@ -196,7 +196,7 @@ impl CanopyBroadPhase {
 
     /// The box the narrow phase needs covered: Rapier's collision box (prediction distance),
     /// merged with the box at the soft-CCD predicted pose.
-    #[inline]
+    #[inline(always)]
     fn collision_aabb(
         params: &IntegrationParameters,
         collider: &Collider,
@@ -205,29 +205,41 @@ impl CanopyBroadPhase {
         let prediction = params.prediction_distance();
         let mut aabb = collider.compute_collision_aabb(prediction / 2.0);
         if let Some(rb) = parent {
-            let max_dist = rb.soft_ccd_prediction();
-            if max_dist > 0.0 {
-                // Rapier clamps the predicted motion to `max_dist`; its exact helper is private,
-                // so clamp the time step the same way from the current velocity.
-                let speed = rb.linvel().norm();
-                let dt = if speed * params.dt > max_dist {
-                    max_dist / speed
-                } else {
-                    params.dt
-                };
-                let pose = rb.predict_position_using_velocity_and_forces(dt)
-                    * collider
-                        .position_wrt_parent()
-                        .copied()
-                        .unwrap_or_else(Isometry::identity);
-                let next = collider
-                    .shape()
-                    .compute_aabb(&pose)
-                    .loosened(collider.contact_skin() + prediction / 2.0);
-                aabb.merge(&next);
+            if rb.soft_ccd_prediction() > 0.0 {
+                aabb.merge(&Self::soft_ccd_aabb(params, collider, rb));
             }
         }
         Aabb::new(aabb.mins, aabb.maxs)
+    }
+
+    /// The collider's box at the pose soft CCD predicts for its parent (rarely enabled, so out
+    /// of line).
+    #[cold]
+    #[inline(never)]
+    fn soft_ccd_aabb(
+        params: &IntegrationParameters,
+        collider: &Collider,
+        rb: &RigidBody,
+    ) -> rapier3d::parry::bounding_volume::Aabb {
+        let prediction = params.prediction_distance();
+        let max_dist = rb.soft_ccd_prediction();
+        // Rapier clamps the predicted motion to `max_dist`; its exact helper is private, so
+        // clamp the time step the same way from the current velocity.
+        let speed = rb.linvel().norm();
+        let dt = if speed * params.dt > max_dist {
+            max_dist / speed
+        } else {
+            params.dt
+        };
+        let pose = rb.predict_position_using_velocity_and_forces(dt)
+            * collider
+                .position_wrt_parent()
+                .copied()
+                .unwrap_or_else(Isometry::identity);
+        collider
+            .shape()
+            .compute_aabb(&pose)
+            .loosened(collider.contact_skin() + prediction / 2.0)
     }
 
     /// The fat box of an exact box: enlarged by the margin (`margins.1` for colliders of fixed
