@@ -643,20 +643,14 @@ fn sweep_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     let n = t.src.len();
     debug_assert!((SMALL + 1..=SWEEP).contains(&n));
     let axis = widest_axis(&b);
-    // Centroid keys (halved so that nothing overflows), sorted by insertion; stable.
-    let mut key = [0.0f32; SWEEP];
-    let mut ord = [0u8; SWEEP];
-    for (i, r) in t.src.iter().enumerate() {
-        let k = r.min[axis] * 0.5 + r.max[axis] * 0.5;
-        let mut j = i;
-        while j > 0 && key[j - 1] > k {
-            key[j] = key[j - 1];
-            ord[j] = ord[j - 1];
-            j -= 1;
-        }
-        key[j] = k;
-        ord[j] = i as u8;
+    // Centroid keys (halved so that nothing overflows), in a stable order: the rank of each
+    // key is the number of keys before it (smaller, or equal and earlier), found without
+    // branches.
+    let mut key = [f32::INFINITY; SWEEP];
+    for (k, r) in key.iter_mut().zip(t.src.iter()) {
+        *k = r.min[axis] * 0.5 + r.max[axis] * 0.5;
     }
+    let ord = stable_order(&key, n);
     let refs = &t.src[..n];
     let at = |i: usize| &refs[ord[i] as usize];
     // right_*[i]: references ord[i..n].
@@ -691,6 +685,31 @@ fn sweep_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     let right = right_box[best];
     let (lt, rt) = t.split(best, true);
     join(b, (lt, left), (rt, right), out, ctx);
+}
+
+/// The order of the first `n` keys of `key` (the others infinite, all finite or infinite):
+/// `ord[r]` is the index of the key of rank `r`, ties in index order (a stable sort).
+#[inline(always)]
+fn stable_order(key: &[f32; SWEEP], n: usize) -> [u8; SWEEP] {
+    const BLOCKS: usize = SWEEP / 4;
+    let kv: [F4; BLOCKS] = std::array::from_fn(|c| {
+        F4::load4(&[key[4 * c], key[4 * c + 1], key[4 * c + 2], key[4 * c + 3]])
+    });
+    let blocks = n.div_ceil(4);
+    let mut ord = [0u8; SWEEP];
+    for (i, &k) in key.iter().enumerate().take(n) {
+        let ki = F4::splat(k);
+        // Bit j of `le`: key j <= key i; of `lt`: key j < key i.
+        let (mut le, mut lt) = (0u32, 0u32);
+        for (c, v) in kv.iter().enumerate().take(blocks) {
+            le |= v.le_bits(ki) << (4 * c);
+            lt |= (!ki.le_bits(*v) & 0xf) << (4 * c);
+        }
+        let before = (1u32 << i) - 1;
+        let rank = (le & before).count_ones() + (lt & !before & !(1 << i)).count_ones();
+        ord[rank as usize & (SWEEP - 1)] = i as u8;
+    }
+    ord
 }
 
 /// The axis of the largest extent of `b` (the first of equals).
