@@ -688,26 +688,35 @@ fn sweep_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
 }
 
 /// The order of the first `n` keys of `key` (the others infinite, all finite or infinite):
-/// `ord[r]` is the index of the key of rank `r`, ties in index order (a stable sort).
+/// `ord[r]` is the index of the key of rank `r`, ties in index order (a stable sort). The rank of
+/// key `i` counts the keys `j < i` with `key[j] <= key[i]` and the keys `j > i` with
+/// `key[j] < key[i]`, four `i` at a time (counts as `f32` lanes, exact).
 #[inline(always)]
 fn stable_order(key: &[f32; SWEEP], n: usize) -> [u8; SWEEP] {
-    const BLOCKS: usize = SWEEP / 4;
-    let kv: [F4; BLOCKS] = std::array::from_fn(|c| {
-        F4::load4(&[key[4 * c], key[4 * c + 1], key[4 * c + 2], key[4 * c + 3]])
-    });
-    let blocks = n.div_ceil(4);
+    let one = F4::splat(1.0);
     let mut ord = [0u8; SWEEP];
-    for (i, &k) in key.iter().enumerate().take(n) {
-        let ki = F4::splat(k);
-        // Bit j of `le`: key j <= key i; of `lt`: key j < key i.
-        let (mut le, mut lt) = (0u32, 0u32);
-        for (c, v) in kv.iter().enumerate().take(blocks) {
-            le |= v.le_bits(ki) << (4 * c);
-            lt |= (!ki.le_bits(*v) & 0xf) << (4 * c);
+    for c in 0..n.div_ceil(4) {
+        let ki = F4::load4(&[key[4 * c], key[4 * c + 1], key[4 * c + 2], key[4 * c + 3]]);
+        let mut acc = F4::splat(0.0);
+        for &k in &key[..4 * c] {
+            acc = acc.add(F4::splat(k).le(ki).and(one));
         }
-        let before = (1u32 << i) - 1;
-        let rank = (le & before).count_ones() + (lt & !before & !(1 << i)).count_ones();
-        ord[rank as usize & (SWEEP - 1)] = i as u8;
+        for (j, &k) in key[4 * c..4 * c + 4].iter().enumerate() {
+            let kj = F4::splat(k);
+            // Lane l > j: key j comes first, counts when <=; otherwise only when <.
+            let first = F4::splat(j as f32).lt(F4::new(0.0, 1.0, 2.0, 3.0));
+            acc = acc.add(F4::select(first, kj.le(ki), kj.lt(ki)).and(one));
+        }
+        for &k in &key[4 * c + 4..n.max(4 * c + 4)] {
+            acc = acc.add(F4::splat(k).lt(ki).and(one));
+        }
+        let r = acc.to_i32();
+        for (l, &rank) in r.iter().enumerate() {
+            let i = 4 * c + l;
+            if i < n {
+                ord[rank as usize & (SWEEP - 1)] = i as u8;
+            }
+        }
     }
     ord
 }
