@@ -1,11 +1,12 @@
 //! Top-down binned SAH builder (Wald 2007, "On fast construction of SAH-based bounding volume
 //! hierarchies"), with an exact search for small nodes.
 //!
-//! Primitive references (box + index, 32 bytes, four-lane vectors) live in two buffers. A node
+//! Primitive references (box + index, 32 bytes, four-lane vectors) live in one buffer. A node
 //! bins its references' centroids along the widest axis of its box (the next one when that gives
 //! no split) in one pass, sweeps the bins for the cheapest split, and partitions its references
-//! out of place into the other buffer without branches; its children's boxes come from the
-//! bins, and the children then work the other way round. A node of at most [`SWEEP`]
+//! without branches: in place (by blocks) above [`LOCAL`] references, below that out of place
+//! between the references and a scratch buffer of the subtree's size, the children then working
+//! the other way round. The children's boxes come from the bins. A node of at most [`SWEEP`]
 //! references sorts them by centroid along the widest axis and tries every split of that order
 //! instead (a sweep: cheaper than binning there, and exact along that axis); one of at most
 //! [`SMALL`] tries every partition into two sets (exact SAH). A node becomes a leaf
@@ -29,6 +30,10 @@ use crate::bvh::{Bvh, Node, PrimBounds};
 
 /// Nodes with at least this many primitives build their children in parallel.
 const PARALLEL_THRESHOLD: usize = 4096;
+/// Nodes of more primitives partition in place; a subtree of at most this many has scratch
+/// of its own size (from a buffer of this size) and partitions out of place.
+const LOCAL: usize = 1024;
+const _: () = assert!(LOCAL <= PARALLEL_THRESHOLD && LOCAL >= SWEEP);
 /// Past this depth, nodes split at the object median (the tree then ends within 32 levels).
 const MAX_SAH_DEPTH: u32 = 64;
 const MAX_BINS: usize = 32;
@@ -188,8 +193,9 @@ impl Ctx {
     }
 }
 
-/// The subtree being built: its references in `src`, scratch of the same length in `dst`, and
-/// its slots of the output primitive arrays (starting at slot `first`).
+/// The subtree being built: its references in `src`, scratch of the same length in `dst`
+/// (empty above [`LOCAL`] references), and its slots of the output primitive arrays (starting
+/// at slot `first`).
 struct Task<'a> {
     src: &'a mut [PrimRef],
     dst: &'a mut [PrimRef],
@@ -209,7 +215,11 @@ impl<'a> Task<'a> {
             (self.src, self.dst)
         };
         let (sl, sr) = src.split_at_mut(mid);
-        let (dl, dr) = dst.split_at_mut(mid);
+        let (dl, dr) = if dst.is_empty() {
+            (Default::default(), Default::default())
+        } else {
+            dst.split_at_mut(mid)
+        };
         let (il, ir) = self.idx.split_at_mut(mid);
         let (bl, br) = self.bnd.split_at_mut(mid);
         let depth = self.depth + 1;
@@ -266,7 +276,7 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
             max: [a.max.x, a.max.y, a.max.z, 0.0],
         })
         .collect();
-    let mut scratch = vec![PrimRef::ZERO; n];
+    let mut scratch = vec![PrimRef::ZERO; n.min(LOCAL)];
     let mut prim_indices = vec![0u32; n];
     let mut prim_bounds = vec![
         PrimBounds {
@@ -287,13 +297,13 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
     let mut nodes = Vec::with_capacity(2 * n);
     let task = Task {
         src: &mut refs,
-        dst: &mut scratch,
+        dst: &mut [],
         idx: &mut prim_indices,
         bnd: &mut prim_bounds,
         first: 0,
         depth: 0,
     };
-    build_node(task, bounds, &mut nodes, &ctx);
+    build_node(task, bounds, &mut scratch, &mut nodes, &ctx);
     let wide = crate::bvh::make_wide(&nodes);
     Bvh {
         nodes,
@@ -305,9 +315,21 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
     }
 }
 
-/// Builds the subtree of `t` (bounds `b`) at the end of `out`.
-fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
+/// Builds the subtree of `t` (bounds `b`) at the end of `out`. `tmp`: at least
+/// `min(n, LOCAL)` references of scratch, for a task of `n <= LOCAL` references without its own.
+fn build_node(t: Task<'_>, b: Box4, tmp: &mut [PrimRef], out: &mut Vec<Node>, ctx: &Ctx) {
     let n = t.src.len();
+    if n <= LOCAL && t.dst.len() < n {
+        let t = Task {
+            src: t.src,
+            dst: &mut tmp[..n],
+            idx: t.idx,
+            bnd: t.bnd,
+            first: t.first,
+            depth: t.depth,
+        };
+        return build_node(t, b, &mut [], out, ctx);
+    }
     if n == 1 {
         return t.leaf(&b, out);
     }
@@ -316,7 +338,7 @@ fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
             return t.leaf(&b, out);
         }
         let mid = median_split(t.src, &b);
-        return recurse_by_pass(t, mid, b, out, ctx);
+        return recurse_by_pass(t, mid, b, tmp, out, ctx);
     }
     if n <= SMALL {
         return small_node(t, b, out, ctx);
@@ -329,13 +351,18 @@ fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
             if ctx.prefers_leaf(n, ctx.area.of_box(&b), s.cost) {
                 return t.leaf(&b, out);
             }
-            partition(t.src, t.dst, &s);
-            let (lt, rt) = t.split(s.left_count, true);
-            join(b, (lt, s.left), (rt, s.right), out, ctx);
+            let in_place = t.dst.is_empty();
+            if in_place {
+                partition_in_place(t.src, &s);
+            } else {
+                partition(t.src, t.dst, &s);
+            }
+            let (lt, rt) = t.split(s.left_count, !in_place);
+            join(b, (lt, s.left), (rt, s.right), tmp, out, ctx);
         }
         None if n > ctx.max_leaf => {
             // Every centroid is the same point: split in the middle.
-            recurse_by_pass(t, n / 2, b, out, ctx)
+            recurse_by_pass(t, n / 2, b, tmp, out, ctx)
         }
         None => t.leaf(&b, out),
     }
@@ -343,18 +370,27 @@ fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
 
 /// Recurses into `..mid` and `mid..` of `t.src` (in place), computing the children's bounds
 /// with one pass over the references.
-fn recurse_by_pass(t: Task<'_>, mid: usize, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
+fn recurse_by_pass(
+    t: Task<'_>,
+    mid: usize,
+    b: Box4,
+    tmp: &mut [PrimRef],
+    out: &mut Vec<Node>,
+    ctx: &Ctx,
+) {
     let lb = Box4::of_refs(&t.src[..mid]);
     let rb = Box4::of_refs(&t.src[mid..]);
     let (lt, rt) = t.split(mid, false);
-    join(b, (lt, lb), (rt, rb), out, ctx);
+    join(b, (lt, lb), (rt, rb), tmp, out, ctx);
 }
 
-/// Writes an interior node of bounds `b` with the two given subtrees.
+/// Writes an interior node of bounds `b` with the two given subtrees (`tmp` as for
+/// [`build_node`]).
 fn join(
     b: Box4,
     (lt, lb): (Task<'_>, Box4),
     (rt, rb): (Task<'_>, Box4),
+    tmp: &mut [PrimRef],
     out: &mut Vec<Node>,
     ctx: &Ctx,
 ) {
@@ -364,18 +400,19 @@ fn join(
     let right_index = if ctx.parallel && n >= PARALLEL_THRESHOLD {
         let cap = 2 * rt.src.len() / ctx.max_leaf + 1;
         let ((), right_nodes) = rayon::join(
-            || build_node(lt, lb, out, ctx),
+            || build_node(lt, lb, tmp, out, ctx),
             || {
                 let mut v = Vec::with_capacity(cap);
-                build_node(rt, rb, &mut v, ctx);
+                let mut tmp = vec![PrimRef::ZERO; rt.src.len().min(LOCAL)];
+                build_node(rt, rb, &mut tmp, &mut v, ctx);
                 v
             },
         );
         append_subtree(out, right_nodes)
     } else {
-        build_node(lt, lb, out, ctx);
+        build_node(lt, lb, tmp, out, ctx);
         let r = out.len() as u32;
-        build_node(rt, rb, out, ctx);
+        build_node(rt, rb, tmp, out, ctx);
         r
     };
     out[me].first = right_index;
@@ -550,9 +587,13 @@ fn split_axis(refs: &[PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option<Spl
 /// Partitions `src` into `dst`: references in bins `0..=s.bin` first, order kept.
 #[inline(never)]
 fn partition(src: &[PrimRef], dst: &mut [PrimRef], s: &Split) {
+    // `f < s.bin + 1` exactly when the clamped bin of `f` is at most `s.bin` (a NaN goes to
+    // the last bin, never on the left).
+    let (axis, k0, k1) = (s.binning.axis & 3, s.binning.k0, s.binning.k1);
+    let limit = (s.bin + 1) as f32;
     let (mut l, mut r) = (0usize, s.left_count);
     for e in src {
-        let goes_left = s.binning.bin(e) <= s.bin;
+        let goes_left = (e.min[axis] + e.max[axis] - k0) * k1 < limit;
         let pos = if goes_left { l } else { r };
         dst[pos] = *e;
         l += goes_left as usize;
@@ -562,6 +603,62 @@ fn partition(src: &[PrimRef], dst: &mut [PrimRef], s: &Split) {
         l == s.left_count && r == src.len(),
         "partition disagrees with the bins"
     );
+}
+
+/// [`partition`] in place (the order within each side is not kept, but depends only on the
+/// input order). Blocks at both ends (Edelkamp and Weiss 2016, "BlockQuicksort"): the
+/// references of each block on the wrong side are found without branches, then swapped
+/// pairwise; what is left in the middle goes by Lomuto's scheme, also without branches.
+#[inline(never)]
+fn partition_in_place(refs: &mut [PrimRef], s: &Split) {
+    const BLOCK: usize = 64;
+    let (axis, k0, k1) = (s.binning.axis & 3, s.binning.k0, s.binning.k1);
+    let limit = (s.bin + 1) as f32;
+    let goes_left = |e: &PrimRef| (e.min[axis] + e.max[axis] - k0) * k1 < limit;
+    // Everything before `lo` goes left, everything from `hi` on goes right.
+    let (mut lo, mut hi) = (0usize, refs.len());
+    let (mut off_l, mut off_r) = ([0u8; BLOCK], [0u8; BLOCK]);
+    let (mut start_l, mut num_l, mut start_r, mut num_r) = (0usize, 0usize, 0usize, 0usize);
+    while hi - lo >= 2 * BLOCK {
+        if num_l == 0 {
+            start_l = 0;
+            for (i, e) in refs[lo..lo + BLOCK].iter().enumerate() {
+                off_l[num_l] = i as u8;
+                num_l += !goes_left(e) as usize;
+            }
+        }
+        if num_r == 0 {
+            start_r = 0;
+            for (i, e) in refs[hi - BLOCK..hi].iter().rev().enumerate() {
+                off_r[num_r] = i as u8;
+                num_r += goes_left(e) as usize;
+            }
+        }
+        let k = num_l.min(num_r);
+        for m in 0..k {
+            let a = lo + off_l[(start_l + m) % BLOCK] as usize;
+            let b = hi - 1 - off_r[(start_r + m) % BLOCK] as usize;
+            refs.swap(a, b);
+        }
+        (start_l, num_l) = (start_l + k, num_l - k);
+        (start_r, num_r) = (start_r + k, num_r - k);
+        if num_l == 0 {
+            lo += BLOCK;
+        }
+        if num_r == 0 {
+            hi -= BLOCK;
+        }
+    }
+    let mid = &mut refs[lo..hi];
+    let mut l = 0usize;
+    for i in 0..mid.len() {
+        let e = mid[i];
+        let left = goes_left(&e);
+        mid[i] = mid[l];
+        mid[l] = e;
+        l += left as usize;
+    }
+    assert!(lo + l == s.left_count, "partition disagrees with the bins");
 }
 
 /// A node of `2..=SMALL` references, split exactly: two references directly, more by trying
@@ -634,7 +731,7 @@ fn enumerate_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
         }
     }
     let (lt, rt) = t.split(left, true);
-    join(b, (lt, sub[m]), (rt, sub[full ^ m]), out, ctx);
+    join(b, (lt, sub[m]), (rt, sub[full ^ m]), &mut [], out, ctx);
 }
 
 /// A node of `SMALL + 1..=SWEEP` references: sorts them by centroid along the widest axis of
@@ -684,7 +781,7 @@ fn sweep_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     }
     let right = right_box[best];
     let (lt, rt) = t.split(best, true);
-    join(b, (lt, left), (rt, right), out, ctx);
+    join(b, (lt, left), (rt, right), &mut [], out, ctx);
 }
 
 /// The order of the first `n` keys of `key` (the others infinite, all finite or infinite):
@@ -746,4 +843,112 @@ fn median_split(refs: &mut [PrimRef], b: &Box4) -> usize {
         key(p).total_cmp(&key(q)).then(p.index().cmp(&q.index()))
     });
     mid
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Small deterministic generator (SplitMix64), uniform in `[0, 1)`.
+    fn rng(seed: u64) -> impl FnMut() -> f32 {
+        let mut s = seed;
+        move || {
+            s = s.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = s;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
+    #[test]
+    fn in_place_partition_matches_bins() {
+        let mut r = rng(7);
+        for n in [
+            1usize, 2, 5, 63, 64, 127, 128, 129, 200, 255, 256, 257, 1000, 3001,
+        ] {
+            for coarse in [false, true] {
+                let refs: Vec<PrimRef> = (0..n)
+                    .map(|i| {
+                        let mut c = [r() * 10.0, r() * 10.0, r() * 10.0];
+                        if coarse {
+                            // Many equal centroids.
+                            c = c.map(|v| v.floor());
+                        }
+                        PrimRef {
+                            min: [c[0], c[1], c[2], f32::from_bits(i as u32)],
+                            max: [c[0] + 0.5, c[1] + 0.5, c[2] + 0.5, 0.0],
+                        }
+                    })
+                    .collect();
+                let b = Box4::of_refs(&refs);
+                for axis in 0..3 {
+                    let Some(binning) = Binning::new(&b, axis, 16) else {
+                        continue;
+                    };
+                    for bin in [0usize, 3, 7, 14] {
+                        let left_count = refs.iter().filter(|e| binning.bin(e) <= bin).count();
+                        let s = Split {
+                            binning,
+                            bin,
+                            cost: 0.0,
+                            left_count,
+                            left: Box4::empty(),
+                            right: Box4::empty(),
+                        };
+                        let mut a = refs.clone();
+                        partition_in_place(&mut a, &s);
+                        assert!(a[..left_count].iter().all(|e| binning.bin(e) <= bin));
+                        assert!(a[left_count..].iter().all(|e| binning.bin(e) > bin));
+                        let mut ids: Vec<u32> = a.iter().map(PrimRef::index).collect();
+                        ids.sort_unstable();
+                        assert!(ids.iter().copied().eq(0..n as u32));
+                        let mut o = vec![PrimRef::ZERO; n];
+                        partition(&refs, &mut o, &s);
+                        assert!(o[..left_count].iter().all(|e| binning.bin(e) <= bin));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn large_degenerate_inputs() {
+        use crate::aabb::Aabb;
+        use nalgebra::Point3;
+        let mut r = rng(11);
+        let n = 6000;
+        let sets: Vec<Vec<Aabb>> = vec![
+            // All the same box.
+            vec![Aabb::new(Point3::new(1.0, 2.0, 3.0), Point3::new(2.0, 3.0, 4.0)); n],
+            // Two clusters of equal boxes and a few others.
+            (0..n)
+                .map(|i| {
+                    let c = match i % 7 {
+                        0 => r() * 100.0,
+                        1..=3 => 5.0,
+                        _ => 50.0,
+                    };
+                    Aabb::new(Point3::new(c, c, 0.0), Point3::new(c + 1.0, c + 1.0, 1.0))
+                })
+                .collect(),
+            // Points on a line.
+            (0..n)
+                .map(|i| {
+                    let x = (i % 1500) as f32;
+                    Aabb::new(Point3::new(x, 0.0, 0.0), Point3::new(x, 0.0, 0.0))
+                })
+                .collect(),
+        ];
+        for boxes in &sets {
+            for max_leaf in [1u32, 4, 2000] {
+                let opts = BuildOptions::default().with_max_leaf_size(max_leaf);
+                let par = Bvh::build(boxes, opts).unwrap();
+                let ser = Bvh::build(boxes, opts.with_parallel(false)).unwrap();
+                par.validate_with_primitives(boxes).unwrap();
+                assert_eq!(par.nodes(), ser.nodes());
+                assert_eq!(par.primitive_indices(), ser.primitive_indices());
+            }
+        }
+    }
 }
