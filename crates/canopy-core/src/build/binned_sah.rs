@@ -24,7 +24,7 @@
 //! instead, which keeps the depth, and so the recursion, bounded.
 
 use super::f4::F4;
-use super::{append_subtree, BuildOptions};
+use super::{append_subtree, box_ok, first_invalid, BuildOptions};
 use crate::aabb::Aabb;
 use crate::bvh::{Bvh, Node, PrimBounds};
 
@@ -208,6 +208,7 @@ struct Task<'a> {
 impl<'a> Task<'a> {
     /// Splits into the tasks of the children `..mid` and `mid..`. With `swap`, the children's
     /// references are in `dst` (after an out-of-place partition) and `src` becomes scratch.
+    #[inline(always)]
     fn split(self, mid: usize, swap: bool) -> (Task<'a>, Task<'a>) {
         let (src, dst) = if swap {
             (self.dst, self.src)
@@ -266,16 +267,28 @@ impl<'a> Task<'a> {
     }
 }
 
-pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
+/// Builds the tree of `aabbs` (not empty), or returns the index of the first invalid box.
+pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize> {
     let n = aabbs.len();
+    // One pass makes the references, checks the boxes and bounds them.
+    let mut ok = true;
+    let mut bounds = Box4::empty();
     let mut refs: Vec<PrimRef> = aabbs
         .iter()
         .enumerate()
-        .map(|(i, a)| PrimRef {
-            min: [a.min.x, a.min.y, a.min.z, f32::from_bits(i as u32)],
-            max: [a.max.x, a.max.y, a.max.z, 0.0],
+        .map(|(i, a)| {
+            ok &= box_ok(a);
+            let r = PrimRef {
+                min: [a.min.x, a.min.y, a.min.z, f32::from_bits(i as u32)],
+                max: [a.max.x, a.max.y, a.max.z, 0.0],
+            };
+            bounds.grow(r.lo(), r.hi());
+            r
         })
         .collect();
+    if !ok {
+        return Err(first_invalid(aabbs).unwrap_or(0));
+    }
     let mut scratch = vec![PrimRef::ZERO; n.min(LOCAL)];
     let mut prim_indices = vec![0u32; n];
     let mut prim_bounds = vec![
@@ -285,7 +298,6 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
         };
         n
     ];
-    let bounds = Box4::of_refs(&refs);
     let ctx = Ctx {
         area: AreaScale::for_root(&bounds),
         bins: options.bins as usize,
@@ -305,14 +317,14 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
     };
     build_node(task, bounds, &mut scratch, &mut nodes, &ctx);
     let wide = crate::bvh::make_wide(&nodes);
-    Bvh {
+    Ok(Bvh {
         nodes,
         prim_indices,
         prim_bounds,
         slot_of: Vec::new(),
         wide,
         ray4: Default::default(),
-    }
+    })
 }
 
 /// Builds the subtree of `t` (bounds `b`) at the end of `out`. `tmp`: at least
@@ -497,32 +509,46 @@ fn find_split(refs: &[PrimRef], b: &Box4, ctx: &Ctx) -> Option<Split> {
         }
     }
     let axes = [a0, a1, a2];
-    axes.iter()
-        .find_map(|&a| Binning::new(b, a, nb).and_then(|bn| split_axis(refs, bn, nb, ctx)))
+    axes.iter().find_map(|&a| {
+        Binning::new(b, a, nb).and_then(|bn| {
+            // Arrays only as large as needed (fewer bins to clear).
+            if nb <= MAX_BINS / 2 {
+                split_axis::<{ MAX_BINS / 2 }>(refs, bn, nb, ctx)
+            } else {
+                split_axis::<MAX_BINS>(refs, bn, nb, ctx)
+            }
+        })
+    })
 }
 
-/// Bins `refs` with `bn` and sweeps the bins for the cheapest split.
+/// Bins `refs` with `bn` (`nb <= NB` bins, `NB` a power of two) and sweeps the bins for the
+/// cheapest split.
 #[inline(always)]
-fn split_axis(refs: &[PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option<Split> {
-    let mut bins = [Box4::empty(); MAX_BINS];
-    let mut counts = [0u32; MAX_BINS];
+fn split_axis<const NB: usize>(
+    refs: &[PrimRef],
+    bn: Binning,
+    nb: usize,
+    ctx: &Ctx,
+) -> Option<Split> {
+    let mut bins = [Box4::empty(); NB];
+    let mut counts = [0u32; NB];
     if refs.len() >= TWO_BIN_SETS {
         // Even and odd references in separate bins, so that consecutive references in one bin
         // do not wait for each other's update.
-        let mut bins2 = [Box4::empty(); MAX_BINS];
-        let mut counts2 = [0u32; MAX_BINS];
+        let mut bins2 = [Box4::empty(); NB];
+        let mut counts2 = [0u32; NB];
         let mut pairs = refs.chunks_exact(2);
         for p in &mut pairs {
             let (r0, r1) = (&p[0], &p[1]);
-            let j0 = bn.bin(r0) & (MAX_BINS - 1);
-            let j1 = bn.bin(r1) & (MAX_BINS - 1);
+            let j0 = bn.bin(r0) & (NB - 1);
+            let j1 = bn.bin(r1) & (NB - 1);
             bins[j0].grow(r0.lo(), r0.hi());
             counts[j0] += 1;
             bins2[j1].grow(r1.lo(), r1.hi());
             counts2[j1] += 1;
         }
         for r in pairs.remainder() {
-            let j = bn.bin(r) & (MAX_BINS - 1);
+            let j = bn.bin(r) & (NB - 1);
             bins[j].grow(r.lo(), r.hi());
             counts[j] += 1;
         }
@@ -532,14 +558,14 @@ fn split_axis(refs: &[PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option<Spl
         }
     } else {
         for r in refs {
-            let j = bn.bin(r) & (MAX_BINS - 1);
+            let j = bn.bin(r) & (NB - 1);
             bins[j].grow(r.lo(), r.hi());
             counts[j] += 1;
         }
     }
 
-    let mut right_area = [0.0f32; MAX_BINS];
-    let mut right_count = [0u32; MAX_BINS];
+    let mut right_area = [0.0f32; NB];
+    let mut right_count = [0u32; NB];
     // right_*[i]: bins i..nb.
     let mut acc = Box4::empty();
     let mut cnt = 0u32;
