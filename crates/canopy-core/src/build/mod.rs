@@ -1,7 +1,8 @@
 //! Builders. [`BuildOptions`] picks one; each lives in its own file:
 //! `binned_sah.rs` (Wald 2007, parallel top levels) and `lbvh.rs` (Morton order, Karras 2012's radix tree built top-down),
-//! with the radix sort the LBVH needs in `radix_sort.rs`. Every builder checks its input here
-//! first and writes the same depth-first [`Bvh`] layout.
+//! with the radix sort the LBVH needs in `radix_sort.rs`. The options are checked here; each
+//! builder checks the boxes in its first pass over them (with the helpers here) and writes the
+//! same depth-first [`Bvh`] layout.
 
 mod binned_sah;
 pub(crate) mod f4;
