@@ -575,30 +575,37 @@ fn split_axis<const NB: usize>(
         right_area[i] = ctx.area.of_box(&acc);
         right_count[i] = cnt;
     }
-    let mut best: Option<(usize, f32, usize)> = None;
+    // The first cheapest split, chosen without branches; splits with an empty side cost
+    // infinity (every real cost is finite).
+    let (mut cost, mut bin, mut left_count) = (f32::INFINITY, 0usize, 0u32);
     let mut acc = Box4::empty();
     let mut cnt = 0u32;
     for i in 0..nb - 1 {
         acc.merge(&bins[i]);
         cnt += counts[i];
         let rc = right_count[i + 1];
-        if cnt == 0 || rc == 0 {
-            continue;
-        }
-        let cost = ctx.area.of_box(&acc) * cnt as f32 + right_area[i + 1] * rc as f32;
-        if best.is_none_or(|b| cost < b.1) {
-            best = Some((i, cost, cnt as usize));
-        }
+        let c = ctx.area.of_box(&acc) * cnt as f32 + right_area[i + 1] * rc as f32;
+        let c = if cnt == 0 || rc == 0 {
+            f32::INFINITY
+        } else {
+            c
+        };
+        let better = c < cost;
+        cost = if better { c } else { cost };
+        bin = if better { i } else { bin };
+        left_count = if better { cnt } else { left_count };
     }
-    let (bin, cost, left_count) = best?;
+    if cost == f32::INFINITY {
+        return None;
+    }
+    let left_count = left_count as usize;
     let mut left = Box4::empty();
     let mut right = Box4::empty();
-    for (i, bin_box) in bins.iter().enumerate().take(nb) {
-        if i <= bin {
-            left.merge(bin_box);
-        } else {
-            right.merge(bin_box);
-        }
+    for bin_box in &bins[..=bin] {
+        left.merge(bin_box);
+    }
+    for bin_box in &bins[bin + 1..nb] {
+        right.merge(bin_box);
     }
     Some(Split {
         binning: bn,
@@ -786,19 +793,20 @@ fn sweep_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
         right_box[i] = acc;
         right_area[i] = ctx.area.of_box(&acc);
     }
+    // left_box[i]: references ord[..=i]. The first cheapest split, chosen without branches.
+    let mut left_box = [Box4::empty(); SWEEP];
     let mut acc = Box4::empty();
     let (mut best_cost, mut best) = (f32::INFINITY, 1usize);
-    let mut left = acc;
     for i in 0..n - 1 {
         let r = at(i);
         acc.grow(r.lo(), r.hi());
+        left_box[i] = acc;
         let cost = ctx.area.of_box(&acc) * (i + 1) as f32 + right_area[i + 1] * (n - 1 - i) as f32;
-        if cost < best_cost {
-            best_cost = cost;
-            best = i + 1;
-            left = acc;
-        }
+        let better = cost < best_cost;
+        best_cost = if better { cost } else { best_cost };
+        best = if better { i + 1 } else { best };
     }
+    let left = left_box[best - 1];
     if ctx.prefers_leaf(n, ctx.area.of_box(&b), best_cost) {
         return t.leaf(&b, out);
     }
