@@ -188,8 +188,8 @@ impl Ctx {
     /// become a leaf of `n` primitives instead, in a node of half-area `area`.
     #[inline(always)]
     fn prefers_leaf(&self, n: usize, area: f32, cost: f32) -> bool {
-        n <= self.max_leaf
-            && self.c_trav * area + self.c_isect * cost >= self.c_isect * n as f32 * area
+        (n <= self.max_leaf)
+            & (self.c_trav * area + self.c_isect * cost >= self.c_isect * n as f32 * area)
     }
 }
 
@@ -755,13 +755,10 @@ fn enumerate_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     let left = m.count_ones() as usize;
     let (mut l, mut r) = (0, left);
     for (k, e) in t.src.iter().enumerate() {
-        if m >> k & 1 == 1 {
-            t.dst[l] = *e;
-            l += 1;
-        } else {
-            t.dst[r] = *e;
-            r += 1;
-        }
+        let goes_left = m >> k & 1 == 1;
+        t.dst[if goes_left { l } else { r }] = *e;
+        l += goes_left as usize;
+        r += !goes_left as usize;
     }
     let (lt, rt) = t.split(left, true);
     join(b, (lt, sub[m]), (rt, sub[full ^ m]), &mut [], out, ctx);
