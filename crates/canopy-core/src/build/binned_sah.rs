@@ -7,8 +7,9 @@
 //! without branches: in place (by blocks) above [`LOCAL`] references, below that out of place
 //! between the references and a scratch buffer of the subtree's size, the children then working
 //! the other way round. The children's boxes come from the bins. A node of at most [`SWEEP`]
-//! references sorts them by centroid along the widest axis and tries every split of that order
-//! instead (a sweep: cheaper than binning there, and exact along that axis); one of at most
+//! references orders them by centroid along the widest axis (ranks counted with vector compares,
+//! without branches) and tries every split of that order instead (a sweep: cheaper than binning
+//! there, and exact along that axis); one of at most
 //! [`SMALL`] tries every partition into two sets (exact SAH). A node becomes a leaf
 //! when no split beats `intersection_cost * n` and the leaf-size limit allows, and writes its
 //! references straight into the tree's primitive arrays.
@@ -18,8 +19,9 @@
 //! build, at a fraction of the cost. Areas are computed in `f32`, scaled by the root's extent so that
 //! nothing overflows.
 //!
-//! The two halves of large nodes are built with `rayon::join` on disjoint halves of every
-//! buffer; the tree does not depend on the thread count. Below the depth limit a node whose
+//! The two halves of large nodes are built with `rayon::join` on disjoint halves of the
+//! reference and output arrays (the right half with scratch of its own); the tree does not
+//! depend on the thread count. Below the depth limit a node whose
 //! centroids coincide, or a node too deep (pathological inputs), is split at the object median
 //! instead, which keeps the depth, and so the recursion, bounded.
 
