@@ -782,37 +782,39 @@ fn sweep_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     let ord = stable_order(&key, n);
     let refs = &t.src[..n];
     let at = |i: usize| &refs[ord[i] as usize];
-    // right_*[i]: references ord[i..n].
-    let mut right_box = [Box4::empty(); SWEEP];
+    // right_area[i]: references ord[i..n].
     let mut right_area = [0.0f32; SWEEP];
     let mut acc = Box4::empty();
     for i in (1..n).rev() {
         let r = at(i);
         acc.grow(r.lo(), r.hi());
-        right_box[i] = acc;
         right_area[i] = ctx.area.of_box(&acc);
     }
-    // left_box[i]: references ord[..=i]. The first cheapest split, chosen without branches.
-    let mut left_box = [Box4::empty(); SWEEP];
+    // The first cheapest split, chosen without branches.
     let mut acc = Box4::empty();
     let (mut best_cost, mut best) = (f32::INFINITY, 1usize);
     for i in 0..n - 1 {
         let r = at(i);
         acc.grow(r.lo(), r.hi());
-        left_box[i] = acc;
         let cost = ctx.area.of_box(&acc) * (i + 1) as f32 + right_area[i + 1] * (n - 1 - i) as f32;
         let better = cost < best_cost;
         best_cost = if better { cost } else { best_cost };
         best = if better { i + 1 } else { best };
     }
-    let left = left_box[best - 1];
     if ctx.prefers_leaf(n, ctx.area.of_box(&b), best_cost) {
         return t.leaf(&b, out);
     }
-    for (d, &o) in t.dst.iter_mut().zip(&ord[..n]) {
+    // The children's boxes, bounded again while the references move to `dst` in order.
+    let (mut left, mut right) = (Box4::empty(), Box4::empty());
+    let (dl, dr) = t.dst.split_at_mut(best);
+    for (d, &o) in dl.iter_mut().zip(&ord[..best]) {
         *d = refs[o as usize];
+        left.grow(d.lo(), d.hi());
     }
-    let right = right_box[best];
+    for (d, &o) in dr.iter_mut().zip(&ord[best..n]) {
+        *d = refs[o as usize];
+        right.grow(d.lo(), d.hi());
+    }
     let (lt, rt) = t.split(best, true);
     join(b, (lt, left), (rt, right), &mut [], out, ctx);
 }
