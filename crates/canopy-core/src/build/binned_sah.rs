@@ -1,13 +1,15 @@
 //! Top-down binned SAH builder (Wald 2007, "On fast construction of SAH-based bounding volume
 //! hierarchies"), with an exact search for small nodes.
 //!
-//! Primitive references (box + index, 32 bytes, four-lane vectors) live in two buffers. A node
+//! Primitive references (box + index, 32 bytes, four-lane vectors) live in one buffer. A node
 //! bins its references' centroids along the widest axis of its box (the next one when that gives
 //! no split) in one pass, sweeps the bins for the cheapest split, and partitions its references
-//! out of place into the other buffer without branches; its children's boxes come from the
-//! bins, and the children then work the other way round. A node of at most [`SWEEP`]
-//! references sorts them by centroid along the widest axis and tries every split of that order
-//! instead (a sweep: cheaper than binning there, and exact along that axis); one of at most
+//! without branches: in place (by blocks) above [`LOCAL`] references, below that out of place
+//! between the references and a scratch buffer of the subtree's size, the children then working
+//! the other way round. The children's boxes come from the bins. A node of at most [`SWEEP`]
+//! references orders them by centroid along the widest axis (ranks counted with vector compares,
+//! without branches) and tries every split of that order instead (a sweep: cheaper than binning
+//! there, and exact along that axis); one of at most
 //! [`SMALL`] tries every partition into two sets (exact SAH). A node becomes a leaf
 //! when no split beats `intersection_cost * n` and the leaf-size limit allows, and writes its
 //! references straight into the tree's primitive arrays.
@@ -17,18 +19,23 @@
 //! build, at a fraction of the cost. Areas are computed in `f32`, scaled by the root's extent so that
 //! nothing overflows.
 //!
-//! The two halves of large nodes are built with `rayon::join` on disjoint halves of every
-//! buffer; the tree does not depend on the thread count. Below the depth limit a node whose
+//! The two halves of large nodes are built with `rayon::join` on disjoint halves of the
+//! reference and output arrays (the right half with scratch of its own); the tree does not
+//! depend on the thread count. Below the depth limit a node whose
 //! centroids coincide, or a node too deep (pathological inputs), is split at the object median
 //! instead, which keeps the depth, and so the recursion, bounded.
 
 use super::f4::F4;
-use super::{append_subtree, BuildOptions};
+use super::{append_subtree, box_ok, first_invalid, BuildOptions};
 use crate::aabb::Aabb;
 use crate::bvh::{Bvh, Node, PrimBounds};
 
 /// Nodes with at least this many primitives build their children in parallel.
 const PARALLEL_THRESHOLD: usize = 4096;
+/// Nodes of more primitives partition in place; a subtree of at most this many has scratch
+/// of its own size (from a buffer of this size) and partitions out of place.
+const LOCAL: usize = 1024;
+const _: () = assert!(LOCAL <= PARALLEL_THRESHOLD && LOCAL >= SWEEP);
 /// Past this depth, nodes split at the object median (the tree then ends within 32 levels).
 const MAX_SAH_DEPTH: u32 = 64;
 const MAX_BINS: usize = 32;
@@ -183,13 +190,14 @@ impl Ctx {
     /// become a leaf of `n` primitives instead, in a node of half-area `area`.
     #[inline(always)]
     fn prefers_leaf(&self, n: usize, area: f32, cost: f32) -> bool {
-        n <= self.max_leaf
-            && self.c_trav * area + self.c_isect * cost >= self.c_isect * n as f32 * area
+        (n <= self.max_leaf)
+            & (self.c_trav * area + self.c_isect * cost >= self.c_isect * n as f32 * area)
     }
 }
 
-/// The subtree being built: its references in `src`, scratch of the same length in `dst`, and
-/// its slots of the output primitive arrays (starting at slot `first`).
+/// The subtree being built: its references in `src`, scratch of the same length in `dst`
+/// (empty above [`LOCAL`] references), and its slots of the output primitive arrays (starting
+/// at slot `first`).
 struct Task<'a> {
     src: &'a mut [PrimRef],
     dst: &'a mut [PrimRef],
@@ -202,6 +210,7 @@ struct Task<'a> {
 impl<'a> Task<'a> {
     /// Splits into the tasks of the children `..mid` and `mid..`. With `swap`, the children's
     /// references are in `dst` (after an out-of-place partition) and `src` becomes scratch.
+    #[inline(always)]
     fn split(self, mid: usize, swap: bool) -> (Task<'a>, Task<'a>) {
         let (src, dst) = if swap {
             (self.dst, self.src)
@@ -209,7 +218,11 @@ impl<'a> Task<'a> {
             (self.src, self.dst)
         };
         let (sl, sr) = src.split_at_mut(mid);
-        let (dl, dr) = dst.split_at_mut(mid);
+        let (dl, dr) = if dst.is_empty() {
+            (Default::default(), Default::default())
+        } else {
+            dst.split_at_mut(mid)
+        };
         let (il, ir) = self.idx.split_at_mut(mid);
         let (bl, br) = self.bnd.split_at_mut(mid);
         let depth = self.depth + 1;
@@ -256,17 +269,29 @@ impl<'a> Task<'a> {
     }
 }
 
-pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
+/// Builds the tree of `aabbs` (not empty), or returns the index of the first invalid box.
+pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize> {
     let n = aabbs.len();
+    // One pass makes the references, checks the boxes and bounds them.
+    let mut ok = true;
+    let mut bounds = Box4::empty();
     let mut refs: Vec<PrimRef> = aabbs
         .iter()
         .enumerate()
-        .map(|(i, a)| PrimRef {
-            min: [a.min.x, a.min.y, a.min.z, f32::from_bits(i as u32)],
-            max: [a.max.x, a.max.y, a.max.z, 0.0],
+        .map(|(i, a)| {
+            ok &= box_ok(a);
+            let r = PrimRef {
+                min: [a.min.x, a.min.y, a.min.z, f32::from_bits(i as u32)],
+                max: [a.max.x, a.max.y, a.max.z, 0.0],
+            };
+            bounds.grow(r.lo(), r.hi());
+            r
         })
         .collect();
-    let mut scratch = vec![PrimRef::ZERO; n];
+    if !ok {
+        return Err(first_invalid(aabbs).unwrap_or(0));
+    }
+    let mut scratch = vec![PrimRef::ZERO; n.min(LOCAL)];
     let mut prim_indices = vec![0u32; n];
     let mut prim_bounds = vec![
         PrimBounds {
@@ -275,7 +300,6 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
         };
         n
     ];
-    let bounds = Box4::of_refs(&refs);
     let ctx = Ctx {
         area: AreaScale::for_root(&bounds),
         bins: options.bins as usize,
@@ -287,27 +311,39 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Bvh {
     let mut nodes = Vec::with_capacity(2 * n);
     let task = Task {
         src: &mut refs,
-        dst: &mut scratch,
+        dst: &mut [],
         idx: &mut prim_indices,
         bnd: &mut prim_bounds,
         first: 0,
         depth: 0,
     };
-    build_node(task, bounds, &mut nodes, &ctx);
+    build_node(task, bounds, &mut scratch, &mut nodes, &ctx);
     let wide = crate::bvh::make_wide(&nodes);
-    Bvh {
+    Ok(Bvh {
         nodes,
         prim_indices,
         prim_bounds,
         slot_of: Vec::new(),
         wide,
         ray4: Default::default(),
-    }
+    })
 }
 
-/// Builds the subtree of `t` (bounds `b`) at the end of `out`.
-fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
+/// Builds the subtree of `t` (bounds `b`) at the end of `out`. `tmp`: at least
+/// `min(n, LOCAL)` references of scratch, for a task of `n <= LOCAL` references without its own.
+fn build_node(t: Task<'_>, b: Box4, tmp: &mut [PrimRef], out: &mut Vec<Node>, ctx: &Ctx) {
     let n = t.src.len();
+    if n <= LOCAL && t.dst.len() < n {
+        let t = Task {
+            src: t.src,
+            dst: &mut tmp[..n],
+            idx: t.idx,
+            bnd: t.bnd,
+            first: t.first,
+            depth: t.depth,
+        };
+        return build_node(t, b, &mut [], out, ctx);
+    }
     if n == 1 {
         return t.leaf(&b, out);
     }
@@ -316,7 +352,7 @@ fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
             return t.leaf(&b, out);
         }
         let mid = median_split(t.src, &b);
-        return recurse_by_pass(t, mid, b, out, ctx);
+        return recurse_by_pass(t, mid, b, tmp, out, ctx);
     }
     if n <= SMALL {
         return small_node(t, b, out, ctx);
@@ -329,13 +365,18 @@ fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
             if ctx.prefers_leaf(n, ctx.area.of_box(&b), s.cost) {
                 return t.leaf(&b, out);
             }
-            partition(t.src, t.dst, &s);
-            let (lt, rt) = t.split(s.left_count, true);
-            join(b, (lt, s.left), (rt, s.right), out, ctx);
+            let in_place = t.dst.is_empty();
+            if in_place {
+                partition_in_place(t.src, &s);
+            } else {
+                partition(t.src, t.dst, &s);
+            }
+            let (lt, rt) = t.split(s.left_count, !in_place);
+            join(b, (lt, s.left), (rt, s.right), tmp, out, ctx);
         }
         None if n > ctx.max_leaf => {
             // Every centroid is the same point: split in the middle.
-            recurse_by_pass(t, n / 2, b, out, ctx)
+            recurse_by_pass(t, n / 2, b, tmp, out, ctx)
         }
         None => t.leaf(&b, out),
     }
@@ -343,18 +384,27 @@ fn build_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
 
 /// Recurses into `..mid` and `mid..` of `t.src` (in place), computing the children's bounds
 /// with one pass over the references.
-fn recurse_by_pass(t: Task<'_>, mid: usize, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
+fn recurse_by_pass(
+    t: Task<'_>,
+    mid: usize,
+    b: Box4,
+    tmp: &mut [PrimRef],
+    out: &mut Vec<Node>,
+    ctx: &Ctx,
+) {
     let lb = Box4::of_refs(&t.src[..mid]);
     let rb = Box4::of_refs(&t.src[mid..]);
     let (lt, rt) = t.split(mid, false);
-    join(b, (lt, lb), (rt, rb), out, ctx);
+    join(b, (lt, lb), (rt, rb), tmp, out, ctx);
 }
 
-/// Writes an interior node of bounds `b` with the two given subtrees.
+/// Writes an interior node of bounds `b` with the two given subtrees (`tmp` as for
+/// [`build_node`]).
 fn join(
     b: Box4,
     (lt, lb): (Task<'_>, Box4),
     (rt, rb): (Task<'_>, Box4),
+    tmp: &mut [PrimRef],
     out: &mut Vec<Node>,
     ctx: &Ctx,
 ) {
@@ -364,18 +414,19 @@ fn join(
     let right_index = if ctx.parallel && n >= PARALLEL_THRESHOLD {
         let cap = 2 * rt.src.len() / ctx.max_leaf + 1;
         let ((), right_nodes) = rayon::join(
-            || build_node(lt, lb, out, ctx),
+            || build_node(lt, lb, tmp, out, ctx),
             || {
                 let mut v = Vec::with_capacity(cap);
-                build_node(rt, rb, &mut v, ctx);
+                let mut tmp = vec![PrimRef::ZERO; rt.src.len().min(LOCAL)];
+                build_node(rt, rb, &mut tmp, &mut v, ctx);
                 v
             },
         );
         append_subtree(out, right_nodes)
     } else {
-        build_node(lt, lb, out, ctx);
+        build_node(lt, lb, tmp, out, ctx);
         let r = out.len() as u32;
-        build_node(rt, rb, out, ctx);
+        build_node(rt, rb, tmp, out, ctx);
         r
     };
     out[me].first = right_index;
@@ -460,32 +511,46 @@ fn find_split(refs: &[PrimRef], b: &Box4, ctx: &Ctx) -> Option<Split> {
         }
     }
     let axes = [a0, a1, a2];
-    axes.iter()
-        .find_map(|&a| Binning::new(b, a, nb).and_then(|bn| split_axis(refs, bn, nb, ctx)))
+    axes.iter().find_map(|&a| {
+        Binning::new(b, a, nb).and_then(|bn| {
+            // Arrays only as large as needed (fewer bins to clear).
+            if nb <= MAX_BINS / 2 {
+                split_axis::<{ MAX_BINS / 2 }>(refs, bn, nb, ctx)
+            } else {
+                split_axis::<MAX_BINS>(refs, bn, nb, ctx)
+            }
+        })
+    })
 }
 
-/// Bins `refs` with `bn` and sweeps the bins for the cheapest split.
+/// Bins `refs` with `bn` (`nb <= NB` bins, `NB` a power of two) and sweeps the bins for the
+/// cheapest split.
 #[inline(always)]
-fn split_axis(refs: &[PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option<Split> {
-    let mut bins = [Box4::empty(); MAX_BINS];
-    let mut counts = [0u32; MAX_BINS];
+fn split_axis<const NB: usize>(
+    refs: &[PrimRef],
+    bn: Binning,
+    nb: usize,
+    ctx: &Ctx,
+) -> Option<Split> {
+    let mut bins = [Box4::empty(); NB];
+    let mut counts = [0u32; NB];
     if refs.len() >= TWO_BIN_SETS {
         // Even and odd references in separate bins, so that consecutive references in one bin
         // do not wait for each other's update.
-        let mut bins2 = [Box4::empty(); MAX_BINS];
-        let mut counts2 = [0u32; MAX_BINS];
+        let mut bins2 = [Box4::empty(); NB];
+        let mut counts2 = [0u32; NB];
         let mut pairs = refs.chunks_exact(2);
         for p in &mut pairs {
             let (r0, r1) = (&p[0], &p[1]);
-            let j0 = bn.bin(r0) & (MAX_BINS - 1);
-            let j1 = bn.bin(r1) & (MAX_BINS - 1);
+            let j0 = bn.bin(r0) & (NB - 1);
+            let j1 = bn.bin(r1) & (NB - 1);
             bins[j0].grow(r0.lo(), r0.hi());
             counts[j0] += 1;
             bins2[j1].grow(r1.lo(), r1.hi());
             counts2[j1] += 1;
         }
         for r in pairs.remainder() {
-            let j = bn.bin(r) & (MAX_BINS - 1);
+            let j = bn.bin(r) & (NB - 1);
             bins[j].grow(r.lo(), r.hi());
             counts[j] += 1;
         }
@@ -495,14 +560,14 @@ fn split_axis(refs: &[PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option<Spl
         }
     } else {
         for r in refs {
-            let j = bn.bin(r) & (MAX_BINS - 1);
+            let j = bn.bin(r) & (NB - 1);
             bins[j].grow(r.lo(), r.hi());
             counts[j] += 1;
         }
     }
 
-    let mut right_area = [0.0f32; MAX_BINS];
-    let mut right_count = [0u32; MAX_BINS];
+    let mut right_area = [0.0f32; NB];
+    let mut right_count = [0u32; NB];
     // right_*[i]: bins i..nb.
     let mut acc = Box4::empty();
     let mut cnt = 0u32;
@@ -512,30 +577,37 @@ fn split_axis(refs: &[PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option<Spl
         right_area[i] = ctx.area.of_box(&acc);
         right_count[i] = cnt;
     }
-    let mut best: Option<(usize, f32, usize)> = None;
+    // The first cheapest split, chosen without branches; splits with an empty side cost
+    // infinity (every real cost is finite).
+    let (mut cost, mut bin, mut left_count) = (f32::INFINITY, 0usize, 0u32);
     let mut acc = Box4::empty();
     let mut cnt = 0u32;
     for i in 0..nb - 1 {
         acc.merge(&bins[i]);
         cnt += counts[i];
         let rc = right_count[i + 1];
-        if cnt == 0 || rc == 0 {
-            continue;
-        }
-        let cost = ctx.area.of_box(&acc) * cnt as f32 + right_area[i + 1] * rc as f32;
-        if best.is_none_or(|b| cost < b.1) {
-            best = Some((i, cost, cnt as usize));
-        }
+        let c = ctx.area.of_box(&acc) * cnt as f32 + right_area[i + 1] * rc as f32;
+        let c = if cnt == 0 || rc == 0 {
+            f32::INFINITY
+        } else {
+            c
+        };
+        let better = c < cost;
+        cost = if better { c } else { cost };
+        bin = if better { i } else { bin };
+        left_count = if better { cnt } else { left_count };
     }
-    let (bin, cost, left_count) = best?;
+    if cost == f32::INFINITY {
+        return None;
+    }
+    let left_count = left_count as usize;
     let mut left = Box4::empty();
     let mut right = Box4::empty();
-    for (i, bin_box) in bins.iter().enumerate().take(nb) {
-        if i <= bin {
-            left.merge(bin_box);
-        } else {
-            right.merge(bin_box);
-        }
+    for bin_box in &bins[..=bin] {
+        left.merge(bin_box);
+    }
+    for bin_box in &bins[bin + 1..nb] {
+        right.merge(bin_box);
     }
     Some(Split {
         binning: bn,
@@ -550,9 +622,13 @@ fn split_axis(refs: &[PrimRef], bn: Binning, nb: usize, ctx: &Ctx) -> Option<Spl
 /// Partitions `src` into `dst`: references in bins `0..=s.bin` first, order kept.
 #[inline(never)]
 fn partition(src: &[PrimRef], dst: &mut [PrimRef], s: &Split) {
+    // `f < s.bin + 1` exactly when the clamped bin of `f` is at most `s.bin` (a NaN goes to
+    // the last bin, never on the left).
+    let (axis, k0, k1) = (s.binning.axis & 3, s.binning.k0, s.binning.k1);
+    let limit = (s.bin + 1) as f32;
     let (mut l, mut r) = (0usize, s.left_count);
     for e in src {
-        let goes_left = s.binning.bin(e) <= s.bin;
+        let goes_left = (e.min[axis] + e.max[axis] - k0) * k1 < limit;
         let pos = if goes_left { l } else { r };
         dst[pos] = *e;
         l += goes_left as usize;
@@ -562,6 +638,62 @@ fn partition(src: &[PrimRef], dst: &mut [PrimRef], s: &Split) {
         l == s.left_count && r == src.len(),
         "partition disagrees with the bins"
     );
+}
+
+/// [`partition`] in place (the order within each side is not kept, but depends only on the
+/// input order). Blocks at both ends (Edelkamp and Weiss 2016, "BlockQuicksort"): the
+/// references of each block on the wrong side are found without branches, then swapped
+/// pairwise; what is left in the middle goes by Lomuto's scheme, also without branches.
+#[inline(never)]
+fn partition_in_place(refs: &mut [PrimRef], s: &Split) {
+    const BLOCK: usize = 64;
+    let (axis, k0, k1) = (s.binning.axis & 3, s.binning.k0, s.binning.k1);
+    let limit = (s.bin + 1) as f32;
+    let goes_left = |e: &PrimRef| (e.min[axis] + e.max[axis] - k0) * k1 < limit;
+    // Everything before `lo` goes left, everything from `hi` on goes right.
+    let (mut lo, mut hi) = (0usize, refs.len());
+    let (mut off_l, mut off_r) = ([0u8; BLOCK], [0u8; BLOCK]);
+    let (mut start_l, mut num_l, mut start_r, mut num_r) = (0usize, 0usize, 0usize, 0usize);
+    while hi - lo >= 2 * BLOCK {
+        if num_l == 0 {
+            start_l = 0;
+            for (i, e) in refs[lo..lo + BLOCK].iter().enumerate() {
+                off_l[num_l] = i as u8;
+                num_l += !goes_left(e) as usize;
+            }
+        }
+        if num_r == 0 {
+            start_r = 0;
+            for (i, e) in refs[hi - BLOCK..hi].iter().rev().enumerate() {
+                off_r[num_r] = i as u8;
+                num_r += goes_left(e) as usize;
+            }
+        }
+        let k = num_l.min(num_r);
+        for m in 0..k {
+            let a = lo + off_l[(start_l + m) % BLOCK] as usize;
+            let b = hi - 1 - off_r[(start_r + m) % BLOCK] as usize;
+            refs.swap(a, b);
+        }
+        (start_l, num_l) = (start_l + k, num_l - k);
+        (start_r, num_r) = (start_r + k, num_r - k);
+        if num_l == 0 {
+            lo += BLOCK;
+        }
+        if num_r == 0 {
+            hi -= BLOCK;
+        }
+    }
+    let mid = &mut refs[lo..hi];
+    let mut l = 0usize;
+    for i in 0..mid.len() {
+        let e = mid[i];
+        let left = goes_left(&e);
+        mid[i] = mid[l];
+        mid[l] = e;
+        l += left as usize;
+    }
+    assert!(lo + l == s.left_count, "partition disagrees with the bins");
 }
 
 /// A node of `2..=SMALL` references, split exactly: two references directly, more by trying
@@ -625,16 +757,13 @@ fn enumerate_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     let left = m.count_ones() as usize;
     let (mut l, mut r) = (0, left);
     for (k, e) in t.src.iter().enumerate() {
-        if m >> k & 1 == 1 {
-            t.dst[l] = *e;
-            l += 1;
-        } else {
-            t.dst[r] = *e;
-            r += 1;
-        }
+        let goes_left = m >> k & 1 == 1;
+        t.dst[if goes_left { l } else { r }] = *e;
+        l += goes_left as usize;
+        r += !goes_left as usize;
     }
     let (lt, rt) = t.split(left, true);
-    join(b, (lt, sub[m]), (rt, sub[full ^ m]), out, ctx);
+    join(b, (lt, sub[m]), (rt, sub[full ^ m]), &mut [], out, ctx);
 }
 
 /// A node of `SMALL + 1..=SWEEP` references: sorts them by centroid along the widest axis of
@@ -643,54 +772,85 @@ fn sweep_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     let n = t.src.len();
     debug_assert!((SMALL + 1..=SWEEP).contains(&n));
     let axis = widest_axis(&b);
-    // Centroid keys (halved so that nothing overflows), sorted by insertion; stable.
-    let mut key = [0.0f32; SWEEP];
-    let mut ord = [0u8; SWEEP];
-    for (i, r) in t.src.iter().enumerate() {
-        let k = r.min[axis] * 0.5 + r.max[axis] * 0.5;
-        let mut j = i;
-        while j > 0 && key[j - 1] > k {
-            key[j] = key[j - 1];
-            ord[j] = ord[j - 1];
-            j -= 1;
-        }
-        key[j] = k;
-        ord[j] = i as u8;
+    // Centroid keys (halved so that nothing overflows), in a stable order: the rank of each
+    // key is the number of keys before it (smaller, or equal and earlier), found without
+    // branches.
+    let mut key = [f32::INFINITY; SWEEP];
+    for (k, r) in key.iter_mut().zip(t.src.iter()) {
+        *k = r.min[axis] * 0.5 + r.max[axis] * 0.5;
     }
+    let ord = stable_order(&key, n);
     let refs = &t.src[..n];
     let at = |i: usize| &refs[ord[i] as usize];
-    // right_*[i]: references ord[i..n].
-    let mut right_box = [Box4::empty(); SWEEP];
+    // right_area[i]: references ord[i..n].
     let mut right_area = [0.0f32; SWEEP];
     let mut acc = Box4::empty();
     for i in (1..n).rev() {
         let r = at(i);
         acc.grow(r.lo(), r.hi());
-        right_box[i] = acc;
         right_area[i] = ctx.area.of_box(&acc);
     }
+    // The first cheapest split, chosen without branches.
     let mut acc = Box4::empty();
     let (mut best_cost, mut best) = (f32::INFINITY, 1usize);
-    let mut left = acc;
     for i in 0..n - 1 {
         let r = at(i);
         acc.grow(r.lo(), r.hi());
         let cost = ctx.area.of_box(&acc) * (i + 1) as f32 + right_area[i + 1] * (n - 1 - i) as f32;
-        if cost < best_cost {
-            best_cost = cost;
-            best = i + 1;
-            left = acc;
-        }
+        let better = cost < best_cost;
+        best_cost = if better { cost } else { best_cost };
+        best = if better { i + 1 } else { best };
     }
     if ctx.prefers_leaf(n, ctx.area.of_box(&b), best_cost) {
         return t.leaf(&b, out);
     }
-    for (d, &o) in t.dst.iter_mut().zip(&ord[..n]) {
+    // The children's boxes, bounded again while the references move to `dst` in order.
+    let (mut left, mut right) = (Box4::empty(), Box4::empty());
+    let (dl, dr) = t.dst.split_at_mut(best);
+    for (d, &o) in dl.iter_mut().zip(&ord[..best]) {
         *d = refs[o as usize];
+        left.grow(d.lo(), d.hi());
     }
-    let right = right_box[best];
+    for (d, &o) in dr.iter_mut().zip(&ord[best..n]) {
+        *d = refs[o as usize];
+        right.grow(d.lo(), d.hi());
+    }
     let (lt, rt) = t.split(best, true);
-    join(b, (lt, left), (rt, right), out, ctx);
+    join(b, (lt, left), (rt, right), &mut [], out, ctx);
+}
+
+/// The order of the first `n` keys of `key` (the others infinite, all finite or infinite):
+/// `ord[r]` is the index of the key of rank `r`, ties in index order (a stable sort). The rank of
+/// key `i` counts the keys `j < i` with `key[j] <= key[i]` and the keys `j > i` with
+/// `key[j] < key[i]`, four `i` at a time (counts as `f32` lanes, exact).
+#[inline(always)]
+fn stable_order(key: &[f32; SWEEP], n: usize) -> [u8; SWEEP] {
+    let one = F4::splat(1.0);
+    let mut ord = [0u8; SWEEP];
+    for c in 0..n.div_ceil(4) {
+        let ki = F4::load4(&[key[4 * c], key[4 * c + 1], key[4 * c + 2], key[4 * c + 3]]);
+        let mut acc = F4::splat(0.0);
+        for &k in &key[..4 * c] {
+            acc = acc.add(F4::splat(k).le(ki).and(one));
+        }
+        for (j, &k) in key[4 * c..4 * c + 4].iter().enumerate() {
+            let kj = F4::splat(k);
+            // Lane l > j: key j comes first, counts when <=; otherwise only when <.
+            let first = F4::splat(j as f32).lt(F4::new(0.0, 1.0, 2.0, 3.0));
+            acc = acc.add(F4::select(first, kj.le(ki), kj.lt(ki)).and(one));
+        }
+        for &k in &key[4 * c + 4..n.max(4 * c + 4)] {
+            acc = acc.add(F4::splat(k).lt(ki).and(one));
+        }
+        let r = acc.to_i32();
+        for (l, &rank) in r.iter().enumerate() {
+            let i = 4 * c + l;
+            if i < n {
+                ord[rank as usize & (SWEEP - 1)] = i as u8;
+            }
+        }
+    }
+    ord
 }
 
 /// The axis of the largest extent of `b` (the first of equals).
@@ -718,4 +878,112 @@ fn median_split(refs: &mut [PrimRef], b: &Box4) -> usize {
         key(p).total_cmp(&key(q)).then(p.index().cmp(&q.index()))
     });
     mid
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Small deterministic generator (SplitMix64), uniform in `[0, 1)`.
+    fn rng(seed: u64) -> impl FnMut() -> f32 {
+        let mut s = seed;
+        move || {
+            s = s.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = s;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
+    #[test]
+    fn in_place_partition_matches_bins() {
+        let mut r = rng(7);
+        for n in [
+            1usize, 2, 5, 63, 64, 127, 128, 129, 200, 255, 256, 257, 1000, 3001,
+        ] {
+            for coarse in [false, true] {
+                let refs: Vec<PrimRef> = (0..n)
+                    .map(|i| {
+                        let mut c = [r() * 10.0, r() * 10.0, r() * 10.0];
+                        if coarse {
+                            // Many equal centroids.
+                            c = c.map(|v| v.floor());
+                        }
+                        PrimRef {
+                            min: [c[0], c[1], c[2], f32::from_bits(i as u32)],
+                            max: [c[0] + 0.5, c[1] + 0.5, c[2] + 0.5, 0.0],
+                        }
+                    })
+                    .collect();
+                let b = Box4::of_refs(&refs);
+                for axis in 0..3 {
+                    let Some(binning) = Binning::new(&b, axis, 16) else {
+                        continue;
+                    };
+                    for bin in [0usize, 3, 7, 14] {
+                        let left_count = refs.iter().filter(|e| binning.bin(e) <= bin).count();
+                        let s = Split {
+                            binning,
+                            bin,
+                            cost: 0.0,
+                            left_count,
+                            left: Box4::empty(),
+                            right: Box4::empty(),
+                        };
+                        let mut a = refs.clone();
+                        partition_in_place(&mut a, &s);
+                        assert!(a[..left_count].iter().all(|e| binning.bin(e) <= bin));
+                        assert!(a[left_count..].iter().all(|e| binning.bin(e) > bin));
+                        let mut ids: Vec<u32> = a.iter().map(PrimRef::index).collect();
+                        ids.sort_unstable();
+                        assert!(ids.iter().copied().eq(0..n as u32));
+                        let mut o = vec![PrimRef::ZERO; n];
+                        partition(&refs, &mut o, &s);
+                        assert!(o[..left_count].iter().all(|e| binning.bin(e) <= bin));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn large_degenerate_inputs() {
+        use crate::aabb::Aabb;
+        use nalgebra::Point3;
+        let mut r = rng(11);
+        let n = 6000;
+        let sets: Vec<Vec<Aabb>> = vec![
+            // All the same box.
+            vec![Aabb::new(Point3::new(1.0, 2.0, 3.0), Point3::new(2.0, 3.0, 4.0)); n],
+            // Two clusters of equal boxes and a few others.
+            (0..n)
+                .map(|i| {
+                    let c = match i % 7 {
+                        0 => r() * 100.0,
+                        1..=3 => 5.0,
+                        _ => 50.0,
+                    };
+                    Aabb::new(Point3::new(c, c, 0.0), Point3::new(c + 1.0, c + 1.0, 1.0))
+                })
+                .collect(),
+            // Points on a line.
+            (0..n)
+                .map(|i| {
+                    let x = (i % 1500) as f32;
+                    Aabb::new(Point3::new(x, 0.0, 0.0), Point3::new(x, 0.0, 0.0))
+                })
+                .collect(),
+        ];
+        for boxes in &sets {
+            for max_leaf in [1u32, 4, 2000] {
+                let opts = BuildOptions::default().with_max_leaf_size(max_leaf);
+                let par = Bvh::build(boxes, opts).unwrap();
+                let ser = Bvh::build(boxes, opts.with_parallel(false)).unwrap();
+                par.validate_with_primitives(boxes).unwrap();
+                assert_eq!(par.nodes(), ser.nodes());
+                assert_eq!(par.primitive_indices(), ser.primitive_indices());
+            }
+        }
+    }
 }

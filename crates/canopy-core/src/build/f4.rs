@@ -107,6 +107,21 @@ mod imp {
         pub(crate) fn le_bits(self, o: F4) -> u32 {
             unsafe { _mm_movemask_ps(_mm_cmple_ps(self.0, o.0)) as u32 }
         }
+        /// Lanes all set where `self <= o`, else clear.
+        #[inline(always)]
+        pub(crate) fn le(self, o: F4) -> F4 {
+            unsafe { F4(_mm_cmple_ps(self.0, o.0)) }
+        }
+        /// Lanes all set where `self < o`, else clear.
+        #[inline(always)]
+        pub(crate) fn lt(self, o: F4) -> F4 {
+            unsafe { F4(_mm_cmplt_ps(self.0, o.0)) }
+        }
+        /// Bitwise and.
+        #[inline(always)]
+        pub(crate) fn and(self, o: F4) -> F4 {
+            unsafe { F4(_mm_and_ps(self.0, o.0)) }
+        }
         /// Lanes 1, 2, 3 moved down to lanes 0, 1, 2 (lane 3 keeps lane 3).
         #[inline(always)]
         pub(crate) fn shift_down(self) -> F4 {
@@ -230,6 +245,22 @@ mod imp {
             (0..4).fold(0, |m, i| m | (((self.0[i] <= o.0[i]) as u32) << i))
         }
         #[inline(always)]
+        pub(crate) fn le(self, o: F4) -> F4 {
+            zip(self, o, |a, b| {
+                f32::from_bits(if a <= b { u32::MAX } else { 0 })
+            })
+        }
+        #[inline(always)]
+        pub(crate) fn lt(self, o: F4) -> F4 {
+            zip(self, o, |a, b| {
+                f32::from_bits(if a < b { u32::MAX } else { 0 })
+            })
+        }
+        #[inline(always)]
+        pub(crate) fn and(self, o: F4) -> F4 {
+            zip(self, o, |a, b| f32::from_bits(a.to_bits() & b.to_bits()))
+        }
+        #[inline(always)]
         pub(crate) fn shift_down(self) -> F4 {
             F4([self.0[1], self.0[2], self.0[3], self.0[3]])
         }
@@ -306,6 +337,14 @@ mod tests {
         assert_eq!(F4::select(F4::mask(false), a, b).to_array(), b.to_array());
         assert_eq!(F4::new(0.5, 1.9, 7.0, 0.0).to_i32(), [0, 1, 7, 0]);
         assert_eq!(a.le_bits(b), 0b0101);
+        let bits = |v: F4| v.to_array().map(|x| x.to_bits() != 0);
+        assert_eq!(bits(a.le(b)), [true, false, true, false]);
+        assert_eq!(bits(a.lt(a)), [false; 4]);
+        assert_eq!(bits(a.le(a)), [true; 4]);
+        assert_eq!(
+            a.and(F4::select(F4::mask(true), a, b)).to_array(),
+            a.to_array()
+        );
         assert_eq!(a.shift_down().to_array(), [2.0, 3.0, 4.0, 4.0]);
         assert_eq!(a.le(b).bits(), 0b0101);
         assert_eq!(a.rot::<1>().to_array(), [2.0, 3.0, 4.0, 1.0]);

@@ -1,7 +1,8 @@
 //! Builders. [`BuildOptions`] picks one; each lives in its own file:
 //! `binned_sah.rs` (Wald 2007, parallel top levels) and `lbvh.rs` (Morton order, Karras 2012's radix tree built top-down),
-//! with the radix sort the LBVH needs in `radix_sort.rs`. Every builder checks its input here
-//! first and writes the same depth-first [`Bvh`] layout.
+//! with the radix sort the LBVH needs in `radix_sort.rs`. The options are checked here; each
+//! builder checks the boxes in its first pass over them (with the helpers here) and writes the
+//! same depth-first [`Bvh`] layout.
 
 mod binned_sah;
 pub(crate) mod f4;
@@ -126,22 +127,16 @@ pub(crate) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, BvhEr
     if aabbs.len() >= u32::MAX as usize {
         return Err(BvhError::TooManyPrimitives { count: aabbs.len() });
     }
-    // The LBVH checks the boxes in its first pass over them.
-    if options.builder != Builder::Lbvh {
-        if let Some(index) = first_invalid(aabbs) {
-            return Err(BvhError::InvalidAabb { index });
-        }
-    }
     if aabbs.is_empty() {
         return Ok(Bvh::default());
     }
-    // The slot map (`Bvh::slot_of`) is left empty: `refit_primitives` makes it when first needed.
+    // Each builder checks the boxes in its first pass over them. The slot map (`Bvh::slot_of`)
+    // is left empty: `refit_primitives` makes it when first needed.
     match options.builder {
-        Builder::BinnedSah => Ok(binned_sah::build(aabbs, options)),
-        Builder::Lbvh => {
-            lbvh::build(aabbs, options).map_err(|index| BvhError::InvalidAabb { index })
-        }
+        Builder::BinnedSah => binned_sah::build(aabbs, options),
+        Builder::Lbvh => lbvh::build(aabbs, options),
     }
+    .map_err(|index| BvhError::InvalidAabb { index })
 }
 
 /// Running min/max bounds on raw arrays, used by the builders.
