@@ -127,16 +127,6 @@ mod imp {
         pub(crate) fn shift_down(self) -> F4 {
             unsafe { F4(_mm_shuffle_ps::<0b11_11_10_01>(self.0, self.0)) }
         }
-        /// All bits of lane `i` set when lane `i` of `self` is `<=` lane `i` of `o`, else clear.
-        #[inline(always)]
-        pub(crate) fn le(self, o: F4) -> F4 {
-            unsafe { F4(_mm_cmple_ps(self.0, o.0)) }
-        }
-        /// Bitwise and (of masks from [`F4::le`]).
-        #[inline(always)]
-        pub(crate) fn and(self, o: F4) -> F4 {
-            unsafe { F4(_mm_and_ps(self.0, o.0)) }
-        }
         /// Lane `i` holds lane `(i + K) % 4` (`K` in `1..=3`).
         #[inline(always)]
         pub(crate) fn rot<const K: i32>(self) -> F4 {
@@ -263,16 +253,6 @@ mod imp {
         #[inline(always)]
         pub(crate) fn shift_down(self) -> F4 {
             F4([self.0[1], self.0[2], self.0[3], self.0[3]])
-        }
-        #[inline(always)]
-        pub(crate) fn le(self, o: F4) -> F4 {
-            let m = |i: usize| f32::from_bits(if self.0[i] <= o.0[i] { u32::MAX } else { 0 });
-            F4([m(0), m(1), m(2), m(3)])
-        }
-        #[inline(always)]
-        pub(crate) fn and(self, o: F4) -> F4 {
-            let m = |i: usize| f32::from_bits(self.0[i].to_bits() & o.0[i].to_bits());
-            F4([m(0), m(1), m(2), m(3)])
         }
         #[inline(always)]
         pub(crate) fn rot<const K: i32>(self) -> F4 {
