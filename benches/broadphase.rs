@@ -3,13 +3,16 @@
 //! sequence of steps. The sequence is recorded once per scene from a simulation stepped with
 //! Rapier's own broadphase; each measured iteration replays it (after the first update, which
 //! inserts every collider and is replayed untimed) into a copy of a broadphase that has already
-//! seen that first update. Single thread: canopy runs inside a 1-thread rayon pool.
+//! seen that first update. Single thread: canopy runs inside a 1-thread rayon pool. A third
+//! function, `floor`, replays the same updates into `AabbFloor`, which only computes each
+//! modified collider's collision box: the work no broadphase avoids, so Rapier's time over the
+//! floor's bounds the ratio any broadphase can reach on that scene.
 //!
 //! `cargo bench --bench broadphase [-- SCENE]`; the time is for the whole sequence, divide by
 //! the number of steps printed for ms per step.
 
 use canopy::rapier::CanopyBroadPhase;
-use canopy::scenes::harness::{replay, RecordedUpdate, Recorder};
+use canopy::scenes::harness::{replay, AabbFloor, RecordedUpdate, Recorder};
 use canopy::scenes::{scene, Size, World, SCENE_NAMES};
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use rapier3d::geometry::{BroadPhase, BroadPhaseBvh};
@@ -71,6 +74,16 @@ fn bench_scenes(c: &mut Criterion) {
             b.iter_batched(
                 || canopy.clone(),
                 |mut bp| pool.install(|| replay(&mut bp, rest)),
+                BatchSize::LargeInput,
+            )
+        });
+        // The floor: only the collision boxes of the modified colliders, which every broadphase
+        // computes; Rapier's time over this is the most any broadphase can gain here.
+        let floor = primed(AabbFloor::default(), first);
+        g.bench_function("floor", |b| {
+            b.iter_batched(
+                || floor.clone(),
+                |mut bp| replay(&mut bp, rest),
                 BatchSize::LargeInput,
             )
         });
