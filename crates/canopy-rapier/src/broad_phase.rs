@@ -24,7 +24,7 @@
 
 use crate::config::CanopyBroadPhaseConfig;
 use crate::filter::{FilterData, Mobility};
-use crate::pair_set::PairSet;
+use crate::pair_set::{unkey, PairSet};
 use crate::proxy::{Loc, Proxy};
 use crate::proxy_tree::{ProxyTree, DEAD};
 use crate::queries::{QueryMirror, QueryOverlay};
@@ -800,20 +800,38 @@ impl BroadPhase for CanopyBroadPhase {
 
         // 6. Liveness: every collider Rapier reported re-checks its candidates that are not live
         //    yet (new candidates were checked above). Live pairs end with their candidate.
+        //    When the touched proxies hold at least half of all waiting candidates, the flat
+        //    list of waiting candidates is read front to back; otherwise each touched proxy's
+        //    partner list.
         let touched = std::mem::take(&mut self.touched);
         let mut flips = Vec::new();
-        for &id in &touched {
-            if self.pairs.waiting(id) == 0 {
-                continue;
+        let checks: usize = touched
+            .iter()
+            .map(|&id| self.pairs.waiting(id) as usize)
+            .sum();
+        if checks * 2 >= self.pairs.waiting_list().len() {
+            for &k in self.pairs.waiting_list() {
+                let (a, b) = unkey(k);
+                if (self.is_touched[a as usize] || self.is_touched[b as usize])
+                    && self.tights[a as usize].intersects(&self.tights[b as usize])
+                {
+                    flips.push((a, b));
+                }
             }
-            let tight = &self.tights[id as usize];
-            for e in self.pairs.partners(id) {
-                // A pair of two touched proxies is checked once, from its smaller id.
-                if e.live || (e.other < id && self.is_touched[e.other as usize]) {
+        } else {
+            for &id in &touched {
+                if self.pairs.waiting(id) == 0 {
                     continue;
                 }
-                if tight.intersects(&self.tights[e.other as usize]) {
-                    flips.push((id, e.other));
+                let tight = &self.tights[id as usize];
+                for e in self.pairs.partners(id) {
+                    // A pair of two touched proxies is checked once, from its smaller id.
+                    if e.live || (e.other < id && self.is_touched[e.other as usize]) {
+                        continue;
+                    }
+                    if tight.intersects(&self.tights[e.other as usize]) {
+                        flips.push((id, e.other));
+                    }
                 }
             }
         }

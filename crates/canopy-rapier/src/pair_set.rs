@@ -6,11 +6,22 @@
 //! not live yet need checking, and per proxy a count of them says whether there are any, so
 //! resting stacks, where every candidate is live, cost nothing here.
 //!
-//! Storage: a hash set of candidate keys for "is this pair new?", and per proxy the list of
-//! its candidate partners with the pair's live flag (kept in both partners' lists) and the
-//! number of its candidates not live yet, so that nothing ever scans all pairs.
+//! Storage: a hash map of candidate keys for "is this pair new?", per proxy the list of its
+//! candidate partners with the pair's live flag (kept in both partners' lists) and the number of
+//! its candidates not live yet, and one flat list of the candidates not live yet (the map holds
+//! each one's place in it), which the liveness pass reads front to back when many proxies have
+//! some, instead of chasing every such proxy's partner list.
 
-use rustc_hash::FxHashSet;
+use rustc_hash::FxHashMap;
+
+/// The place in the waiting list of a candidate that is live.
+const LIVE: u32 = u32::MAX;
+
+/// The two proxy ids of a key, smaller first.
+#[inline]
+pub(crate) fn unkey(k: u64) -> (u32, u32) {
+    ((k >> 32) as u32, k as u32)
+}
 
 #[inline]
 fn key(a: u32, b: u32) -> u64 {
@@ -27,7 +38,10 @@ pub(crate) struct Edge {
 
 #[derive(Clone, Debug, Default)]
 pub(crate) struct PairSet {
-    candidates: FxHashSet<u64>,
+    /// Candidate key -> its index in `waiting_list`, or [`LIVE`].
+    candidates: FxHashMap<u64, u32>,
+    /// Keys of the candidates that are not live, in no particular order.
+    waiting_list: Vec<u64>,
     adjacency: Vec<Vec<Edge>>,
     /// Per proxy: number of its candidates that are not live.
     waiting: Vec<u32>,
@@ -73,9 +87,15 @@ impl PairSet {
 
     /// Adds a candidate (not live); `false` when it was already there.
     pub fn insert(&mut self, a: u32, b: u32) -> bool {
-        if !self.candidates.insert(key(a, b)) {
-            return false;
+        let k = key(a, b);
+        let place = self.waiting_list.len() as u32;
+        match self.candidates.entry(k) {
+            std::collections::hash_map::Entry::Occupied(_) => return false,
+            std::collections::hash_map::Entry::Vacant(v) => {
+                v.insert(place);
+            }
         }
+        self.waiting_list.push(k);
         self.adj_mut(a).push(Edge {
             other: b,
             live: false,
@@ -98,22 +118,51 @@ impl PairSet {
             }
         }
         if was != live {
+            let k = key(a, b);
             if live {
                 self.live += 1;
                 self.count_waiting(a, b, -1);
+                self.leave_waiting_list(k, LIVE);
             } else {
                 self.live -= 1;
                 self.count_waiting(a, b, 1);
+                let place = self.waiting_list.len() as u32;
+                self.waiting_list.push(k);
+                self.candidates.insert(k, place);
             }
         }
         was
     }
 
+    /// Takes key `k` out of the waiting list (when it is there) and sets its map entry to
+    /// `place` (when it is still a candidate).
+    fn leave_waiting_list(&mut self, k: u64, place: u32) {
+        let Some(at) = self.candidates.get_mut(&k) else {
+            return;
+        };
+        let i = std::mem::replace(at, place);
+        if i == LIVE {
+            return;
+        }
+        self.waiting_list.swap_remove(i as usize);
+        if let Some(&moved) = self.waiting_list.get(i as usize) {
+            if let Some(m) = self.candidates.get_mut(&moved) {
+                *m = i;
+            }
+        }
+    }
+
+    /// Keys of the candidates that are not live (see [`unkey`]).
+    pub fn waiting_list(&self) -> &[u64] {
+        &self.waiting_list
+    }
+
     /// Removes candidate `a`-`b`; returns whether it was live (`None` when it was not there).
     pub fn remove(&mut self, a: u32, b: u32) -> Option<bool> {
-        if !self.candidates.remove(&key(a, b)) {
-            return None;
-        }
+        let k = key(a, b);
+        self.candidates.get(&k)?;
+        self.leave_waiting_list(k, LIVE);
+        self.candidates.remove(&k);
         let mut live = false;
         for (x, y) in [(a, b), (b, a)] {
             let adj = self.adj_mut(x);
@@ -143,7 +192,9 @@ impl PairSet {
     pub fn remove_all(&mut self, a: u32) -> Vec<Edge> {
         let partners = std::mem::take(self.adj_mut(a));
         for e in &partners {
-            self.candidates.remove(&key(a, e.other));
+            let k = key(a, e.other);
+            self.leave_waiting_list(k, LIVE);
+            self.candidates.remove(&k);
             let adj = self.adj_mut(e.other);
             if let Some(i) = adj.iter().position(|f| f.other == a) {
                 adj.swap_remove(i);
@@ -165,5 +216,101 @@ impl PairSet {
                 .filter(move |e| e.live && (a as u32) < e.other)
                 .map(move |e| (a as u32, e.other))
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::collections::BTreeMap;
+
+    #[derive(Clone, Debug)]
+    enum Op {
+        Insert(u32, u32),
+        Live(u32, u32),
+        Remove(u32, u32),
+        RemoveAll(u32),
+    }
+
+    fn op() -> impl Strategy<Value = Op> {
+        let id = 0u32..12;
+        prop_oneof![
+            4 => (id.clone(), id.clone()).prop_map(|(a, b)| Op::Insert(a, b)),
+            3 => (id.clone(), id.clone()).prop_map(|(a, b)| Op::Live(a, b)),
+            2 => (id.clone(), id.clone()).prop_map(|(a, b)| Op::Remove(a, b)),
+            1 => id.prop_map(Op::RemoveAll),
+        ]
+    }
+
+    proptest! {
+        /// Against a map of candidate -> live flag: the answers of every call, the counts, the
+        /// per-proxy waiting counts and partner lists, and the flat waiting list.
+        #[test]
+        fn matches_a_plain_map(ops in prop::collection::vec(op(), 0..200)) {
+            let mut set = PairSet::default();
+            let mut model: BTreeMap<(u32, u32), bool> = BTreeMap::new();
+            let norm = |a: u32, b: u32| (a.min(b), a.max(b));
+            for op in ops {
+                match op {
+                    Op::Insert(a, b) if a != b => {
+                        let new = !model.contains_key(&norm(a, b));
+                        prop_assert_eq!(set.insert(a, b), new);
+                        model.entry(norm(a, b)).or_insert(false);
+                    }
+                    Op::Live(a, b) if a != b => {
+                        if let Some(live) = model.get_mut(&norm(a, b)) {
+                            prop_assert_eq!(set.set_live(a, b, true), *live);
+                            *live = true;
+                        }
+                    }
+                    Op::Remove(a, b) if a != b => {
+                        prop_assert_eq!(set.remove(a, b), model.remove(&norm(a, b)));
+                    }
+                    Op::RemoveAll(a) => {
+                        let mut gone: Vec<(u32, bool)> = set
+                            .remove_all(a)
+                            .iter()
+                            .map(|e| (e.other, e.live))
+                            .collect();
+                        gone.sort();
+                        let mut expected = Vec::new();
+                        model.retain(|&(x, y), &mut live| {
+                            if x == a || y == a {
+                                expected.push((if x == a { y } else { x }, live));
+                                false
+                            } else {
+                                true
+                            }
+                        });
+                        expected.sort();
+                        prop_assert_eq!(gone, expected);
+                    }
+                    _ => {}
+                }
+                prop_assert_eq!(set.candidate_len(), model.len());
+                prop_assert_eq!(set.live_len(), model.values().filter(|&&l| l).count());
+                let mut waiting: Vec<(u32, u32)> =
+                    set.waiting_list().iter().map(|&k| unkey(k)).collect();
+                waiting.sort();
+                let expected: Vec<(u32, u32)> =
+                    model.iter().filter(|(_, &l)| !l).map(|(&p, _)| p).collect();
+                prop_assert_eq!(waiting, expected);
+                for id in 0..12u32 {
+                    let w = model.iter().filter(|(&(x, y), &l)| !l && (x == id || y == id)).count();
+                    prop_assert_eq!(set.waiting(id) as usize, w);
+                    let mut partners: Vec<(u32, bool)> =
+                        set.partners(id).iter().map(|e| (e.other, e.live)).collect();
+                    partners.sort();
+                    let mut expected: Vec<(u32, bool)> = model
+                        .iter()
+                        .filter(|(&(x, y), _)| x == id || y == id)
+                        .map(|(&(x, y), &l)| (if x == id { y } else { x }, l))
+                        .collect();
+                    expected.sort();
+                    prop_assert_eq!(partners, expected);
+                }
+            }
+        }
     }
 }
