@@ -198,11 +198,13 @@ proptest! {
         let bvh = build_checked(&boxes, opts);
         let q = query_near(&boxes, pick, offset, half);
         let mut got: Vec<u32> = bvh.overlaps(&q).collect();
+        // The callback form walks another array, in the same order.
+        let mut cb = Vec::new();
+        bvh.for_each_overlap(&q, |i| cb.push(i));
+        prop_assert_eq!(&cb, &got);
         got.sort_unstable();
         let expect: Vec<u32> = (0..boxes.len() as u32).filter(|&i| boxes[i as usize].intersects(&q)).collect();
         prop_assert_eq!(&got, &expect);
-        let mut cb = Vec::new();
-        bvh.for_each_overlap(&q, |i| cb.push(i));
         cb.sort_unstable();
         prop_assert_eq!(cb, expect);
 

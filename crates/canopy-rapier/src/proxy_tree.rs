@@ -334,11 +334,11 @@ impl ProxyTree {
     /// Calls `f` with every live BVH member whose fat box overlaps `aabb` (pending excluded).
     #[inline]
     pub fn query_members(&self, aabb: &Aabb, mut f: impl FnMut(u32)) {
-        for slot in self.bvh.overlaps(aabb) {
+        self.bvh.for_each_overlap(aabb, |slot| {
             let id = self.members[slot as usize];
             if id != DEAD {
                 f(id);
             }
-        }
+        });
     }
 }

@@ -1,9 +1,10 @@
-//! Box overlap and point containment queries: a callback form and an iterator form. Both report
-//! exactly the primitives whose stored box overlaps the query (closed boxes).
+//! Box overlap and point containment queries: a callback form (a walk of the tree's wide array,
+//! both children of a node in one cache line) and an iterator form (on the nodes). Both report
+//! exactly the primitives whose stored box overlaps the query (closed boxes), in the same order.
 
 use super::Stack;
 use crate::aabb::{overlaps, Aabb};
-use crate::bvh::Bvh;
+use crate::bvh::{wide_at, Bvh};
 use nalgebra::Point3;
 use std::ops::Range;
 
@@ -83,8 +84,36 @@ impl Bvh {
     /// # Ok::<(), canopy_core::BvhError>(())
     /// ```
     pub fn for_each_overlap(&self, aabb: &Aabb, mut f: impl FnMut(u32)) {
-        for i in self.overlaps(aabb) {
-            f(i);
+        // On the wide array: both children of a node are tested from one cache line when the
+        // node is visited, and only the overlapping ones are pushed (right first), so leaves
+        // come in the same order as from `overlaps`.
+        let Some(root) = self.wide.first().map(|w| &w.0[0]) else {
+            return;
+        };
+        let (min, max) = (aabb.min_array(), aabb.max_array());
+        if !overlaps(&root.min, &root.max, &min, &max) {
+            return;
+        }
+        let mut stack: Stack<u32> = Stack::new();
+        stack.push(0);
+        while let Some(r) = stack.pop() {
+            let e = &wide_at(&self.wide, r as usize / 2).0[r as usize % 2];
+            if e.is_leaf() {
+                for slot in e.leaf_range() {
+                    let b = &self.prim_bounds[slot];
+                    if overlaps(&b.min, &b.max, &min, &max) {
+                        f(self.prim_indices[slot]);
+                    }
+                }
+                continue;
+            }
+            let [left, right] = &wide_at(&self.wide, e.first as usize).0;
+            if overlaps(&right.min, &right.max, &min, &max) {
+                stack.push(2 * e.first + 1);
+            }
+            if overlaps(&left.min, &left.max, &min, &max) {
+                stack.push(2 * e.first);
+            }
         }
     }
 
