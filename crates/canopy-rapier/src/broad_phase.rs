@@ -536,13 +536,17 @@ impl CanopyBroadPhase {
         let Some(p) = &self.proxies[id as usize] else {
             return;
         };
+        // Its current candidates (step 4 has dropped those that ended) are found again: they
+        // are skipped here, from its own short partner list, rather than by a lookup each in the
+        // pair set's hash map.
+        let known = self.pairs.partners(id);
         for m in Mobility::ALL {
             let tree = &self.trees[m as usize];
             if tree.members.is_empty() || !self.may_query(p, m) {
                 continue;
             }
             tree.query_members(&p.fat, |other| {
-                if other == id {
+                if other == id || known.iter().any(|e| e.other == other) {
                     return;
                 }
                 let Some(o) = &self.proxies[other as usize] else {
