@@ -201,9 +201,10 @@ pub struct Bvh {
     /// Inverse of `prim_indices`: the slot of each primitive. Empty after a build;
     /// `refit_primitives` makes it when first needed (most users never need it).
     pub(crate) slot_of: Vec<u32>,
-    /// Both children of each interior node in one cache line (see [`Wide`]), for the pair walk;
-    /// made with the tree and refit with it.
-    pub(crate) wide: Vec<Wide>,
+    /// Both children of each interior node in one cache line (see [`Wide`]), for the box
+    /// queries and the pair walks on binary nodes: made by the first such query after a build
+    /// (builds that are never queried so do not pay for it), refit with the tree once made.
+    pub(crate) wide: std::sync::OnceLock<Vec<Wide>>,
     /// The four-wide copy of the tree that the ray casts and [`Bvh::self_pairs`] walk (see
     /// `query/ray.rs`): made by the first such query after a build, refit with the tree once
     /// made.
@@ -237,6 +238,12 @@ impl Bvh {
     /// ```
     pub fn build(aabbs: &[Aabb], options: BuildOptions) -> Result<Bvh, BvhError> {
         build::build(aabbs, &options)
+    }
+
+    /// The wide array (see [`Wide`]), made on first use.
+    #[inline]
+    pub(crate) fn wide(&self) -> &[Wide] {
+        self.wide.get_or_init(|| make_wide(&self.nodes))
     }
 
     /// An empty tree.

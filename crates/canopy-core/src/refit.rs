@@ -111,7 +111,9 @@ impl Bvh {
             self.nodes[i].min = b.min;
             self.nodes[i].max = b.max;
         }
-        crate::bvh::refresh_wide(&self.nodes, &mut self.wide);
+        if let Some(wide) = self.wide.get_mut() {
+            crate::bvh::refresh_wide(&self.nodes, wide);
+        }
         if let Some(r4) = self.ray4.get_mut() {
             r4.refresh(&self.nodes);
         }

@@ -318,13 +318,12 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
         depth: 0,
     };
     build_node(task, bounds, &mut scratch, &mut nodes, &ctx);
-    let wide = crate::bvh::make_wide(&nodes);
     Ok(Bvh {
         nodes,
         prim_indices,
         prim_bounds,
         slot_of: Vec::new(),
-        wide,
+        wide: Default::default(),
         ray4: Default::default(),
     })
 }

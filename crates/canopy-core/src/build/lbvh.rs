@@ -127,13 +127,12 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
     };
     ctx.emit(0, n, &mut nodes);
     nodes.shrink_to_fit();
-    let wide = crate::bvh::make_wide(&nodes);
     Ok(Bvh {
         nodes,
         prim_indices,
         prim_bounds,
         slot_of: Vec::new(),
-        wide,
+        wide: Default::default(),
         ray4: Default::default(),
     })
 }

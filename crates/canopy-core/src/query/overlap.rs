@@ -87,7 +87,8 @@ impl Bvh {
         // On the wide array: both children of a node are tested from one cache line when the
         // node is visited, and only the overlapping ones are pushed (right first), so leaves
         // come in the same order as from `overlaps`.
-        let Some(root) = self.wide.first().map(|w| &w.0[0]) else {
+        let wide = self.wide();
+        let Some(root) = wide.first().map(|w| &w.0[0]) else {
             return;
         };
         let (min, max) = (aabb.min_array(), aabb.max_array());
@@ -97,7 +98,7 @@ impl Bvh {
         let mut stack: Stack<u32> = Stack::new();
         stack.push(0);
         while let Some(r) = stack.pop() {
-            let e = &wide_at(&self.wide, r as usize / 2).0[r as usize % 2];
+            let e = &wide_at(wide, r as usize / 2).0[r as usize % 2];
             if e.is_leaf() {
                 for slot in e.leaf_range() {
                     let b = &self.prim_bounds[slot];
@@ -107,7 +108,7 @@ impl Bvh {
                 }
                 continue;
             }
-            let [left, right] = &wide_at(&self.wide, e.first as usize).0;
+            let [left, right] = &wide_at(wide, e.first as usize).0;
             if overlaps(&right.min, &right.max, &min, &max) {
                 stack.push(2 * e.first + 1);
             }

@@ -380,7 +380,7 @@ fn report<const SELF: bool, const SWAP: bool>(ip: u32, iq: u32, f: &mut impl FnM
 /// tested from one cache line. A leaf of one primitive has that primitive's box, so two such
 /// leaves pushed as overlapping are reported without another test.
 fn wwalk<const SELF: bool>(t1: &Bvh, t2: &Bvh, start: Task, f: &mut impl FnMut(u32, u32)) {
-    let (w1, w2) = (&t1.wide[..], &t2.wide[..]);
+    let (w1, w2) = (t1.wide(), t2.wide());
     let mut stack: Vec<Task> = Vec::with_capacity(128);
     let mut qstack: Vec<u32> = Vec::with_capacity(64);
     stack.push(start);
@@ -531,7 +531,7 @@ fn wprim_query<const SELF: bool, const SWAP: bool>(
 ) {
     let (plo, phi) = node_box(leaf);
     let ip = tp.prim_indices[leaf.first as usize];
-    let wide = &tq.wide[..];
+    let wide = tq.wide();
     qstack.clear();
     let mut cur = root as usize;
     loop {
@@ -672,7 +672,7 @@ impl Bvh {
     /// # Ok::<(), canopy_core::BvhError>(())
     /// ```
     pub fn par_self_pairs(&self) -> Vec<(u32, u32)> {
-        if self.wide.is_empty() {
+        if self.nodes.is_empty() {
             return Vec::new();
         }
         super::pairs4::par_self_pairs4(self, PARALLEL_TASKS)
