@@ -240,12 +240,15 @@ impl<B: BroadPhase> BroadPhase for Recorder<B> {
 /// The part of an update that every broadphase does, whatever its structure: the collision box
 /// of every modified, enabled collider, as Rapier's `BroadPhaseBvh` computes it
 /// (`compute_collision_aabb(prediction_distance / 2)`, after reading the parent body's soft-CCD
-/// distance), and nothing else: no tree, no pairs, no events. Timed beside a broadphase on the
-/// same inputs it bounds the ratio any broadphase can reach there: Rapier's time / this time.
+/// distance), in collider index order (memory order, which the hardware prefetcher streams),
+/// and nothing else: no tree, no pairs, no events. Timed beside a broadphase on the same inputs
+/// it bounds the ratio any broadphase can reach there: Rapier's time / this time.
 #[derive(Clone, Debug, Default)]
 pub struct AabbFloor {
     /// Sum of the boxes' lower x bounds, so that the work cannot be optimised away.
     pub checksum: f32,
+    /// Reused buffer: the modified handles in index order.
+    order: Vec<ColliderHandle>,
 }
 
 impl BroadPhase for AabbFloor {
@@ -260,7 +263,10 @@ impl BroadPhase for AabbFloor {
     ) {
         let prediction = params.prediction_distance() / 2.0;
         let mut sum = 0.0;
-        for &h in modified {
+        self.order.clear();
+        self.order.extend_from_slice(modified);
+        self.order.sort_unstable_by_key(|h| h.into_raw_parts().0);
+        for &h in &self.order {
             let Some(c) = colliders.get(h) else {
                 continue;
             };
