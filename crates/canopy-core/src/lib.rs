@@ -40,6 +40,8 @@ pub mod query;
 pub mod ray;
 mod refit;
 pub mod stats;
+#[cfg(test)]
+mod testing;
 mod validate;
 
 pub use aabb::Aabb;

@@ -883,16 +883,10 @@ fn median_split(refs: &mut [PrimRef], b: &Box4) -> usize {
 mod tests {
     use super::*;
 
-    /// Small deterministic generator (SplitMix64), uniform in `[0, 1)`.
+    /// The shared generator (`crate::testing::rng`), uniform in `[0, 1)`.
     fn rng(seed: u64) -> impl FnMut() -> f32 {
-        let mut s = seed;
-        move || {
-            s = s.wrapping_add(0x9e37_79b9_7f4a_7c15);
-            let mut z = s;
-            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-            ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-        }
+        let mut r = crate::testing::rng(seed);
+        move || r(0.0, 1.0)
     }
 
     #[test]
