@@ -76,9 +76,10 @@ impl Node {
     }
 }
 
-/// Both children of one interior node side by side in one 64-byte cache line, so that the pair
-/// walks test both children of a node from one line (the ray casts and the serial self-pair
-/// walk use a four-wide copy, in `query/ray.rs`). A child that is an interior node has `count == 0` and `first` = the index
+/// Both children of one interior node side by side in one 64-byte cache line, so that the box
+/// queries and the binary pair walks test both children of a node from one line (the ray casts
+/// and the self-pair walks use a four-wide copy, in `query/ray.rs`). A child that is an
+/// interior node has `count == 0` and `first` = the index
 /// of *its* `Wide` (not a node index); a leaf child is the leaf node itself. `wide[0]` holds
 /// the root (twice); interior node `k` in depth-first order (root `k = 0`) has its children in
 /// `wide[k + 1]`. A child is addressed as `2 * wide index + side` (root: 0).

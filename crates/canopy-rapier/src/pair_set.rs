@@ -122,7 +122,10 @@ impl PairSet {
             if live {
                 self.live += 1;
                 self.count_waiting(a, b, -1);
-                self.leave_waiting_list(k, LIVE);
+                if let Some(at) = self.candidates.get_mut(&k) {
+                    let i = std::mem::replace(at, LIVE);
+                    self.drop_waiting(i);
+                }
             } else {
                 self.live -= 1;
                 self.count_waiting(a, b, 1);
@@ -134,13 +137,9 @@ impl PairSet {
         was
     }
 
-    /// Takes key `k` out of the waiting list (when it is there) and sets its map entry to
-    /// `place` (when it is still a candidate).
-    fn leave_waiting_list(&mut self, k: u64, place: u32) {
-        let Some(at) = self.candidates.get_mut(&k) else {
-            return;
-        };
-        let i = std::mem::replace(at, place);
+    /// Takes entry `i` out of the waiting list (nothing for [`LIVE`]); the key moved into its
+    /// place gets its new index in the map.
+    fn drop_waiting(&mut self, i: u32) {
         if i == LIVE {
             return;
         }
@@ -159,10 +158,8 @@ impl PairSet {
 
     /// Removes candidate `a`-`b`; returns whether it was live (`None` when it was not there).
     pub fn remove(&mut self, a: u32, b: u32) -> Option<bool> {
-        let k = key(a, b);
-        self.candidates.get(&k)?;
-        self.leave_waiting_list(k, LIVE);
-        self.candidates.remove(&k);
+        let i = self.candidates.remove(&key(a, b))?;
+        self.drop_waiting(i);
         let mut live = false;
         for (x, y) in [(a, b), (b, a)] {
             let adj = self.adj_mut(x);
@@ -192,9 +189,9 @@ impl PairSet {
     pub fn remove_all(&mut self, a: u32) -> Vec<Edge> {
         let partners = std::mem::take(self.adj_mut(a));
         for e in &partners {
-            let k = key(a, e.other);
-            self.leave_waiting_list(k, LIVE);
-            self.candidates.remove(&k);
+            if let Some(i) = self.candidates.remove(&key(a, e.other)) {
+                self.drop_waiting(i);
+            }
             let adj = self.adj_mut(e.other);
             if let Some(i) = adj.iter().position(|f| f.other == a) {
                 adj.swap_remove(i);
