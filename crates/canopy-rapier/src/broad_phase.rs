@@ -12,13 +12,14 @@
 //! 4. Deletions: only candidate pairs (fat boxes overlapping, see `pair_set.rs`) of moved
 //!    proxies are checked; a candidate goes when the fat boxes separate or the filter now
 //!    rejects it, with `DeletePair` if it was live.
-//! 5. New candidates: moved proxies are marked in their tree, and one marked pair walk per
+//! 5. New candidates. With few moves, one query per moved proxy on every tree it may pair
+//!    with (members and the pending proxies' small tree); of two moved proxies the smaller id
+//!    reports. Otherwise moved proxies are marked in their tree, and one marked pair walk per
 //!    pair of trees that may pair (never fixed-fixed unless some collider enables it) finds
 //!    every pair with a moved proxy, skipping subtrees without one (parallel walks give the
-//!    same order with any thread count); with few moves, one query per moved proxy instead.
-//!    Proxies added since the last rebuild have a small tree of their own, walked with marks
-//!    against the member trees, and are swept and pruned among themselves. A new candidate
-//!    whose exact boxes overlap is live at once (`AddPair`).
+//!    same order with any thread count); proxies added since the last rebuild have a small
+//!    tree of their own, walked with marks against the member trees, and are swept and pruned
+//!    among themselves. A new candidate whose exact boxes overlap is live at once (`AddPair`).
 //! 6. Liveness: every collider Rapier reported checks its candidates that are not live yet;
 //!    those whose exact boxes now overlap become live (`AddPair`).
 
@@ -32,8 +33,8 @@ use crate::stats::BroadPhaseStats;
 use canopy_core::{Aabb, PairMarks};
 use rapier3d::prelude::*;
 
-/// With fewer moved tree members than one in this many, new pairs are found by one query per
-/// moved proxy instead of marked pair walks.
+/// With fewer moved proxies than one tree member in this many, new pairs are found by one
+/// query per moved proxy instead of marked pair walks.
 const SPARSE_MOVES: usize = 8;
 
 /// A broadphase for Rapier built on canopy-core BVHs: fat boxes, one tree per mobility
@@ -529,11 +530,11 @@ impl CanopyBroadPhase {
         }
     }
 
-    /// Step 5 for a moved tree member when few moved: its partners among BVH members, found by
-    /// a query on every tree it may pair with (pending partners are found by
-    /// [`Self::pending_pairs`]); among moved members the one with the smaller id reports.
-    fn member_pairs(&self, id: u32, out: &mut Vec<(u32, u32)>) {
-        let Some(p) = &self.proxies[id as usize] else {
+    /// Step 5 for a moved proxy when few moved: its partners among every proxy (BVH members
+    /// and pending ones), found by a query on every tree it may pair with; of two moved
+    /// proxies, the one with the smaller id reports the pair.
+    fn moved_pairs(&self, id: u32, out: &mut Vec<(u32, u32)>) {
+        let Some(p) = self.proxies[id as usize].as_ref().filter(|p| p.is_valid()) else {
             return;
         };
         // Its current candidates (step 4 has dropped those that ended) are found again: they
@@ -542,10 +543,10 @@ impl CanopyBroadPhase {
         let known = self.pairs.partners(id);
         for m in Mobility::ALL {
             let tree = &self.trees[m as usize];
-            if tree.members.is_empty() || !self.may_query(p, m) {
+            if tree.len() == 0 || !self.may_query(p, m) {
                 continue;
             }
-            tree.query_members(&p.fat, |other| {
+            tree.for_each_overlap(&self.proxies, &p.fat, |other| {
                 if other == id || known.iter().any(|e| e.other == other) {
                     return;
                 }
@@ -579,37 +580,21 @@ impl CanopyBroadPhase {
         ta.len() > 0 && tb.len() > 0 && ta.summary.may_pair_with_tree(&tb.summary)
     }
 
-    /// Step 5: every new candidate pair of a moved proxy. Tree members that moved are marked
-    /// and found by one marked pair walk per pair of trees; pending proxies query.
+    /// Step 5: every new candidate pair of a moved proxy. With few moves, one query per moved
+    /// proxy; otherwise tree members that moved are marked and found by one marked pair walk
+    /// per pair of trees, and the pending proxies' trees are walked against the member trees.
     fn find_new_pairs(&mut self, moved: &[u32]) -> Vec<(u32, u32)> {
-        let in_trees = |p: &&Proxy| matches!(p.loc, Loc::Tree(_));
-        let moved_members = moved
-            .iter()
-            .filter_map(|&id| self.proxies[id as usize].as_ref())
-            .filter(in_trees)
-            .count();
         let members: usize = self.trees.iter().map(|t| t.members.len()).sum();
-        let sparse = moved_members * SPARSE_MOVES < members;
-        let has_pending = self.trees.iter().any(|t| !t.pending.is_empty());
-        let marks = if sparse && !has_pending {
-            [None, None, None]
-        } else {
-            self.member_marks(moved)
-        };
         let mut found = Vec::new();
-        if sparse {
-            // Few moved: one query each beats a walk over trees that are mostly unmarked.
+        if moved.len() * SPARSE_MOVES < members {
+            // Few moved: one query each beats any pass over whole trees.
             for &id in moved {
-                if self.proxies[id as usize]
-                    .as_ref()
-                    .is_some_and(|p| in_trees(&p))
-                {
-                    self.member_pairs(id, &mut found);
-                }
+                self.moved_pairs(id, &mut found);
             }
-        } else {
-            self.walk_members(&marks, &mut found);
+            return found;
         }
+        let marks = self.member_marks(moved);
+        self.walk_members(&marks, &mut found);
         self.pending_pairs(&marks, &mut found);
         found
     }
