@@ -76,17 +76,6 @@ fn parse_args() -> Args {
 
 /// Steps per scene at full size, chosen so that the whole run stays under five minutes on a
 /// 2-core machine while each scene runs long enough to reach its steady state.
-fn default_steps(name: &str, size: Size) -> usize {
-    match size {
-        Size::Small => 100,
-        Size::Full => match name {
-            "many_static" | "many_sleep" => 60,
-            "keva_tower" | "many_pyramids" | "pyramid" => 100,
-            _ => 200,
-        },
-    }
-}
-
 struct Row {
     name: String,
     colliders: usize,
@@ -303,7 +292,9 @@ fn main() {
         args.scenes
             .iter()
             .map(|name| {
-                let steps = args.steps.unwrap_or_else(|| default_steps(name, args.size));
+                let steps = args
+                    .steps
+                    .unwrap_or_else(|| standard_steps(name, args.size));
                 // The truth check costs more than a step on the big scenes: a few checks each.
                 let verify = args.verify_every.unwrap_or(steps.div_ceil(4).max(1));
                 eprint!("{name:<16} {steps} steps ... ");

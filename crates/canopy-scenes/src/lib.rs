@@ -63,6 +63,24 @@ pub const SCENE_NAMES: &[&str] = &[
     "teleport",
 ];
 
+/// The number of steps the `compare` example runs scene `name` for at `size` (the criterion
+/// broadphase bench replays the same steps): enough to pass the scene's transient (falling,
+/// settling, the first spawns) into its steady part, fewer for the scenes whose steps are long.
+///
+/// ```
+/// assert_eq!(canopy_scenes::standard_steps("balls", canopy_scenes::Size::Full), 200);
+/// ```
+pub fn standard_steps(name: &str, size: Size) -> usize {
+    match size {
+        Size::Small => 100,
+        Size::Full => match name {
+            "many_static" | "many_sleep" => 60,
+            "keva_tower" | "many_pyramids" | "pyramid" => 100,
+            _ => 200,
+        },
+    }
+}
+
 /// Builds the scene called `name` (one of [`SCENE_NAMES`]) at `size`, or
 /// returns `None` for an unknown name.
 pub fn scene(name: &str, size: Size) -> Option<Scene> {
