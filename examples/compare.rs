@@ -12,7 +12,7 @@
 
 use canopy::rapier::CanopyBroadPhase;
 use canopy::scenes::harness::Instrumented;
-use canopy::scenes::{scene, Size, World, SCENE_NAMES};
+use canopy::scenes::{scene, standard_steps, Size, World, SCENE_NAMES};
 use plotters::prelude::*;
 use rapier3d::geometry::BroadPhaseBvh;
 use std::path::PathBuf;
