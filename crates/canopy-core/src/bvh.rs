@@ -199,9 +199,10 @@ pub struct Bvh {
     pub(crate) nodes: Vec<Node>,
     pub(crate) prim_indices: Vec<u32>,
     pub(crate) prim_bounds: Vec<PrimBounds>,
-    /// Inverse of `prim_indices`: the slot of each primitive. Empty after a build;
-    /// `refit_primitives` makes it when first needed (most users never need it).
-    pub(crate) slot_of: Vec<u32>,
+    /// The maps of `refit_primitives` (the slot and leaf of each primitive, the parent of each
+    /// node...; see `refit.rs`). Empty after a build; `refit_primitives` makes them when first
+    /// needed (most users never need them).
+    pub(crate) refit: crate::refit::RefitMaps,
     /// Both children of each interior node in one cache line (see [`Wide`]), for the box
     /// queries and the pair walks on binary nodes: made by the first such query after a build
     /// (builds that are never queried so do not pay for it), refit with the tree once made.

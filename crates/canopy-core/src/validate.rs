@@ -22,7 +22,9 @@ impl Bvh {
     ///   comes after the whole left subtree, and a preorder walk visits `0, 1, 2, ...`;
     /// * every node box holds its children's boxes, every leaf box its primitives' boxes;
     /// * leaves are non-empty and their ranges tile the primitive array exactly once, in order;
-    /// * every primitive index `0..len` appears exactly once, every stored box is valid.
+    /// * every primitive index `0..len` appears exactly once, every stored box is valid;
+    /// * the copies of the tree that queries and refits make on demand, where made, match it
+    ///   (the wide array holds the node boxes, the maps of the partial refit the topology).
     ///
     /// # Example
     /// ```
@@ -53,7 +55,8 @@ impl Bvh {
             ensure!((p as usize) < n, "slot {slot}: primitive {p} out of range");
             ensure!(!seen[p as usize], "primitive {p} appears twice");
             ensure!(
-                self.slot_of.is_empty() || self.slot_of.get(p as usize) == Some(&(slot as u32)),
+                self.refit.slot_of.is_empty()
+                    || self.refit.slot_of.get(p as usize) == Some(&(slot as u32)),
                 "primitive {p}: slot map does not point at slot {slot}"
             );
             seen[p as usize] = true;
@@ -115,6 +118,17 @@ impl Bvh {
             self.nodes.len() - next_node
         );
         ensure!(next_slot == n, "leaves cover {next_slot} of {n} slots");
+        // The copies and maps made on demand must match the tree.
+        if let Some(wide) = self.wide.get() {
+            ensure!(
+                *wide == crate::bvh::make_wide(&self.nodes),
+                "the wide array differs from the nodes"
+            );
+        }
+        ensure!(
+            self.refit.matches(&self.nodes, &self.prim_indices),
+            "the refit maps differ from the tree"
+        );
         Ok(())
     }
 

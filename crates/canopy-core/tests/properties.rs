@@ -2,7 +2,7 @@
 //! random inputs drawn from several distributions (uniform, clustered, identical, zero-size,
 //! far from the origin), including empty and single-box inputs. Every tree is validated.
 
-use canopy_core::{Aabb, BuildOptions, Builder, Bvh, BvhError, Ray};
+use canopy_core::{Aabb, BuildOptions, Builder, Bvh, BvhError, Node, Ray};
 use nalgebra::{Point3, Vector3};
 use proptest::prelude::*;
 
@@ -111,8 +111,132 @@ fn query_near(boxes: &[Aabb], pick: usize, offset: [f32; 3], half: [f32; 3]) -> 
     Aabb::from_center_half_extents(c + Vector3::from(offset), Vector3::from(half))
 }
 
+/// Every field of every node, floats as bits (so that `-0.0 != 0.0`).
+fn node_bits(nodes: &[Node]) -> Vec<[u32; 8]> {
+    nodes
+        .iter()
+        .map(|n| {
+            let [a, b, c] = n.min.map(f32::to_bits);
+            let [d, e, f] = n.max.map(f32::to_bits);
+            [a, b, c, n.first, d, e, f, n.count]
+        })
+        .collect()
+}
+
+/// One primitive's new box: (which, offset of its centre, new half extents, how). How: 0,
+/// a jump twenty times as far; 1, a point at whole (often zero, of either sign) coordinates
+/// near the origin; else a small move.
+type Change = (usize, [f32; 3], [f32; 3], u8);
+
+fn change() -> impl Strategy<Value = Change> {
+    (
+        any::<usize>(),
+        prop::array::uniform3(-2.0f32..2.0),
+        prop::array::uniform3(0.0f32..3.0),
+        0u8..10,
+    )
+}
+
+/// One round of `refit_primitives`: (kind, changes). Kind 0: one change; 1: a few; 2: all the
+/// listed ones (up to a few hundred, duplicates likely); 3: every primitive, and the listed
+/// ones again after.
+fn refit_round() -> impl Strategy<Value = (u8, Vec<Change>)> {
+    (0u8..4, prop::collection::vec(change(), 1..400))
+}
+
+/// The changes of one round on `cur` (updated, the last change of a primitive counting).
+fn round_changes(cur: &mut [Aabb], kind: u8, list: &[Change]) -> Vec<(u32, Aabb)> {
+    let n = cur.len();
+    let list = match kind {
+        0 => &list[..1],
+        1 => &list[..list.len().min(8)],
+        _ => list,
+    };
+    let mut order: Vec<(usize, &Change)> = Vec::new();
+    if kind == 3 {
+        order.extend((0..n).map(|i| (i, &list[i % list.len()])));
+    }
+    order.extend(list.iter().map(|c| (c.0 % n, c)));
+    order
+        .into_iter()
+        .map(|(i, &(_, o, h, how))| {
+            let b = match how {
+                0 => Aabb::from_center_half_extents(
+                    cur[i].center() + Vector3::from(o.map(|c| c * 20.0)),
+                    Vector3::from(h),
+                ),
+                1 => Aabb::from_point(Point3::from(o.map(|c| (c * 0.4).round()))),
+                _ => Aabb::from_center_half_extents(
+                    cur[i].center() + Vector3::from(o),
+                    Vector3::from(h),
+                ),
+            };
+            cur[i] = b;
+            (i as u32, b)
+        })
+        .collect()
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+
+    /// Rounds of `refit_primitives` (which takes the partial path for few changes and the full
+    /// one for many) against a full refit of the same tree: the same nodes to the bit once the
+    /// tree has been refit whole once (a fresh SAH tree may hold zeros of the other sign than
+    /// refit computes, which a partial refit keeps where it does not reach: the same values),
+    /// a valid tree with its wide copy exact, and box queries on both arrays, made before the
+    /// refits, exact.
+    #[test]
+    fn partial_refit_rounds_match_the_full_refit(
+        boxes in box_set(300),
+        opts in options(),
+        rounds in prop::collection::vec(refit_round(), 1..6),
+        queries in prop::collection::vec((0usize..1000, prop::array::uniform3(-3.0f32..3.0), prop::array::uniform3(0.0f32..4.0)), 1..4),
+        four_wide in prop::bool::ANY,
+    ) {
+        prop_assume!(!boxes.is_empty());
+        let fresh = build_checked(&boxes, opts);
+        let mut normalized = fresh.clone();
+        normalized.refit(&boxes).expect("valid boxes refit");
+        for (fresh_tree, mut bvh) in [(true, fresh), (false, normalized)] {
+            let mut cur = boxes.clone();
+            // Make the wide array (and, sometimes, the four-wide copy) before the refits.
+            let q = query_near(&cur, queries[0].0, queries[0].1, queries[0].2);
+            bvh.for_each_overlap(&q, |_| {});
+            if four_wide {
+                bvh.self_pairs(|_, _| {});
+            }
+            for (kind, list) in &rounds {
+                let changes = round_changes(&mut cur, *kind, list);
+                let mut full = bvh.clone();
+                full.refit(&cur).expect("valid boxes refit");
+                bvh.refit_primitives(&changes).expect("valid changes refit");
+                if fresh_tree {
+                    prop_assert_eq!(bvh.nodes(), full.nodes());
+                } else {
+                    prop_assert_eq!(node_bits(bvh.nodes()), node_bits(full.nodes()));
+                }
+                // Also checks the wide array against the nodes.
+                bvh.validate_with_primitives(&cur).expect("refit tree is valid");
+                for &(pick, offset, half) in &queries {
+                    let q = query_near(&cur, pick, offset, half);
+                    let expect: Vec<u32> = (0..cur.len() as u32).filter(|&i| cur[i as usize].intersects(&q)).collect();
+                    let mut cb = Vec::new();
+                    bvh.for_each_overlap(&q, |i| cb.push(i));
+                    cb.sort_unstable();
+                    prop_assert_eq!(&cb, &expect);
+                    let mut got: Vec<u32> = bvh.overlaps(&q).collect();
+                    got.sort_unstable();
+                    prop_assert_eq!(&got, &expect);
+                }
+                if four_wide {
+                    let mut got = Vec::new();
+                    bvh.self_pairs(|a, b| got.push((a, b)));
+                    prop_assert_eq!(sorted(got), brute_self_pairs(&cur));
+                }
+            }
+        }
+    }
 
     #[test]
     fn self_pairs_match_brute_force(boxes in box_set(200), opts in options()) {

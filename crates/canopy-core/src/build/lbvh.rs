@@ -131,9 +131,7 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
         nodes,
         prim_indices,
         prim_bounds,
-        slot_of: Vec::new(),
-        wide: Default::default(),
-        ray4: Default::default(),
+        ..Default::default()
     })
 }
 

@@ -130,8 +130,8 @@ pub(crate) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, BvhEr
     if aabbs.is_empty() {
         return Ok(Bvh::default());
     }
-    // Each builder checks the boxes in its first pass over them. The slot map (`Bvh::slot_of`)
-    // is left empty: `refit_primitives` makes it when first needed.
+    // Each builder checks the boxes in its first pass over them. The maps of the partial refit
+    // (`Bvh::refit`) and the wide copies are left empty: made when first needed.
     match options.builder {
         Builder::BinnedSah => binned_sah::build(aabbs, options),
         Builder::Lbvh => lbvh::build(aabbs, options),
