@@ -3,7 +3,9 @@
 //! sequence of steps. The sequence is recorded once per scene from a simulation stepped with
 //! Rapier's own broadphase; each measured iteration replays it (after the first update, which
 //! inserts every collider and is replayed untimed) into a copy of a broadphase that has already
-//! seen that first update. Single thread: canopy runs inside a 1-thread rayon pool. A third
+//! seen that first update, timing only the `update` calls: before each one the recorded sets
+//! are copied afresh, untimed (`harness::replay_timed`), as a step's position update writes
+//! them just before the pipeline calls the broadphase. Single thread: canopy runs inside a 1-thread rayon pool. A third
 //! function, `floor`, replays the same updates into `AabbFloor`, which only computes each
 //! modified collider's collision box: the work no broadphase avoids, so Rapier's time over the
 //! floor's bounds the ratio any broadphase can reach on that scene.
