@@ -122,9 +122,8 @@ impl RefitMaps {
     }
 }
 
-/// The box of node `i` (`node`, a copy) from its primitives (leaf) or its children (interior),
-/// for the partial path: the same expression as in `Bvh::refit_nodes`, which writes it out
-/// (calling this there cost the full pass about 1% more instructions).
+/// The box of node `i` (`node`, a copy) from its primitives (leaf) or its children (interior):
+/// the one expression both the full pass and the partial path compute.
 #[inline(always)]
 fn node_bounds(nodes: &[Node], prims: &[PrimBounds], i: usize, node: &Node) -> Bounds {
     if node.is_leaf() {
@@ -299,19 +298,7 @@ impl Bvh {
     pub(crate) fn refit_nodes(&mut self) {
         for i in (0..self.nodes.len()).rev() {
             let node = self.nodes[i];
-            let b = if node.is_leaf() {
-                Bounds::of_prims(&self.prim_bounds[node.leaf_range()])
-            } else {
-                let (l, r) = (&self.nodes[i + 1], &self.nodes[node.right() as usize]);
-                Bounds {
-                    min: l.min,
-                    max: l.max,
-                }
-                .merged(&Bounds {
-                    min: r.min,
-                    max: r.max,
-                })
-            };
+            let b = node_bounds(&self.nodes, &self.prim_bounds, i, &node);
             self.nodes[i].min = b.min;
             self.nodes[i].max = b.max;
         }
