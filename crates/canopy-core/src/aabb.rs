@@ -100,6 +100,19 @@ impl Aabb {
         (0..3).all(|i| self.min[i] <= other.min[i] && other.max[i] <= self.max[i])
     }
 
+    /// [`Aabb::contains`] without early exits: all six comparisons, combined bitwise, so that
+    /// no branch waits on the boxes (for loops where the answer is hard to predict and the
+    /// boxes arrive late from memory).
+    #[inline]
+    pub fn contains_branchless(&self, other: &Aabb) -> bool {
+        (self.min.x <= other.min.x)
+            & (other.max.x <= self.max.x)
+            & (self.min.y <= other.min.y)
+            & (other.max.y <= self.max.y)
+            & (self.min.z <= other.min.z)
+            & (other.max.z <= self.max.z)
+    }
+
     /// The centre point, computed without overflow for boxes near `f32::MAX`.
     #[inline]
     pub fn center(&self) -> Point3<f32> {

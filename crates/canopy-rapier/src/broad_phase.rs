@@ -86,6 +86,10 @@ pub struct CanopyBroadPhase {
     /// Per proxy id: the exact collision box at the last update that saw the collider. Kept
     /// apart from the proxies so the liveness pass reads one dense array.
     pub(crate) tights: Vec<Aabb>,
+    /// Ids written by the fast path of step 2; the first `leaver_count` are proxies whose
+    /// exact box left their fat box this update.
+    leavers: Vec<u32>,
+    leaver_count: usize,
     /// Reused buffers: a bitmap of the modified handles' indices (all zero between updates)
     /// and their generations.
     scratch_order: (Vec<u64>, Vec<u32>),
@@ -269,9 +273,88 @@ impl CanopyBroadPhase {
         fat
     }
 
-    /// Step 2 for one collider.
+    /// Step 2 for one collider: the fast path here, everything else in `examine_full`.
     #[allow(clippy::too_many_arguments)]
     fn examine(
+        &mut self,
+        params: &IntegrationParameters,
+        colliders: &ColliderSet,
+        bodies: &RigidBodySet,
+        handle: ColliderHandle,
+        margins: (f32, f32),
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) {
+        let id = handle.into_raw_parts().0;
+        let Some(collider) = colliders.get(handle) else {
+            return;
+        };
+        let parent = collider.parent().and_then(|h| bodies.get(h));
+        let enabled = collider.is_enabled();
+
+        // Fast path, the common case: a known, valid proxy whose filter inputs did not change.
+        // Either its exact box is still inside its fat box (nothing to do), or it gets a new
+        // fat box in place after the loop.
+        if let Some(Some(p)) = self.proxies.get_mut(id as usize) {
+            if enabled && p.handle == handle && p.is_valid() && p.filter.same_as(collider, parent) {
+                let tight = Self::collision_aabb(params, collider, parent);
+                self.tights[id as usize] = tight;
+                // Only proxies with candidates not live yet have anything to check in step 6
+                // (a non-live candidate counts at both ends, and new ones are checked in step 5).
+                if self.pairs.waiting(id) > 0 {
+                    self.is_touched[id as usize] = true;
+                    self.touched.push(id);
+                }
+                // Whether the exact box left the fat box waits on the collider's memory: no
+                // branch on it here (a misprediction would stall the loop until that load
+                // arrives). The id is written either way and kept only when it left; those
+                // get their new fat box after the loop (`refatten`).
+                let left = !p.fat.contains_branchless(&tight);
+                if let Some(slot) = self.leavers.get_mut(self.leaver_count) {
+                    *slot = id;
+                    self.leaver_count += left as usize;
+                } else if left {
+                    self.leavers.push(id);
+                    self.leaver_count += 1;
+                }
+                return;
+            }
+        }
+        self.examine_full(params, colliders, bodies, handle, margins, events);
+    }
+
+    /// Step 2 for a proxy of the fast path whose exact box left its fat box: a new fat box in
+    /// place, or the full examination when that box is not valid.
+    fn refatten(
+        &mut self,
+        params: &IntegrationParameters,
+        colliders: &ColliderSet,
+        bodies: &RigidBodySet,
+        id: u32,
+        margins: (f32, f32),
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) {
+        let Some(handle) = self.proxies[id as usize].as_ref().map(|p| p.handle) else {
+            return;
+        };
+        let Some(collider) = colliders.get(handle) else {
+            return;
+        };
+        let parent = collider.parent().and_then(|h| bodies.get(h));
+        let tight = self.tights[id as usize];
+        let fat = Self::fat_box(self.config.velocity_steps, &tight, margins, params, parent);
+        if let (true, Some(p)) = (fat.is_valid(), self.proxies[id as usize].as_mut()) {
+            p.fat = fat;
+            self.trees[p.mobility as usize].set_box(p);
+            self.mark_moved(id);
+        } else {
+            self.examine_full(params, colliders, bodies, handle, margins, events);
+        }
+    }
+
+    /// Step 2 for one collider outside the fast path: new, stale, disabled, invalid, or with
+    /// changed filter inputs or mobility.
+    #[allow(clippy::too_many_arguments)]
+    fn examine_full(
         &mut self,
         params: &IntegrationParameters,
         colliders: &ColliderSet,
@@ -287,32 +370,6 @@ impl CanopyBroadPhase {
         };
         let parent = collider.parent().and_then(|h| bodies.get(h));
         let enabled = collider.is_enabled();
-
-        // Fast path, the common case: a known, valid proxy whose filter inputs did not change.
-        // Either its exact box is still inside its fat box (nothing to do), or it gets a new
-        // fat box in place.
-        if let Some(Some(p)) = self.proxies.get_mut(id as usize) {
-            if enabled && p.handle == handle && p.is_valid() && p.filter.same_as(collider, parent) {
-                let tight = Self::collision_aabb(params, collider, parent);
-                self.tights[id as usize] = tight;
-                // Only proxies with candidates not live yet have anything to check in step 6
-                // (a non-live candidate counts at both ends, and new ones are checked in step 5).
-                if self.pairs.waiting(id) > 0 {
-                    self.is_touched[id as usize] = true;
-                    self.touched.push(id);
-                }
-                if p.fat.contains(&tight) {
-                    return;
-                }
-                let fat = Self::fat_box(velocity_steps, &tight, margins, params, parent);
-                if fat.is_valid() {
-                    p.fat = fat;
-                    self.trees[p.mobility as usize].set_box(p);
-                    self.mark_moved(id);
-                    return;
-                }
-            }
-        }
 
         if let Some(Some(p)) = self.proxies.get(id as usize) {
             if p.handle != handle {
@@ -728,6 +785,10 @@ impl BroadPhase for CanopyBroadPhase {
             bits[word] |= 1 << (index % 64);
             generations[index] = generation;
         }
+        if self.leavers.len() < modified_colliders.len() {
+            self.leavers.resize(modified_colliders.len(), 0);
+        }
+        self.leaver_count = 0;
         for (w, word) in bits.iter_mut().enumerate() {
             while *word != 0 {
                 let bit = word.trailing_zeros();
@@ -738,6 +799,11 @@ impl BroadPhase for CanopyBroadPhase {
             }
         }
         self.scratch_order = (bits, generations);
+        let leavers = std::mem::take(&mut self.leavers);
+        for &id in &leavers[..self.leaver_count] {
+            self.refatten(params, colliders, bodies, id, margins, events);
+        }
+        self.leavers = leavers;
 
         // 3. Trees.
         let policy = self.config.rebuild;
