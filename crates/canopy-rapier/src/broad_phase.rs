@@ -273,29 +273,33 @@ impl CanopyBroadPhase {
         fat
     }
 
-    /// Step 2 for one collider: the fast path here, everything else in `examine_full`.
+    /// Step 2 for one collider: the fast path here, everything else in `examine_full`. On the
+    /// fast path with a parent body, returns that body: the caller still has to compare its
+    /// body type with the proxy's (`check_body_types`).
     #[allow(clippy::too_many_arguments)]
-    fn examine(
+    fn examine<'b>(
         &mut self,
         params: &IntegrationParameters,
         colliders: &ColliderSet,
-        bodies: &RigidBodySet,
+        bodies: &'b RigidBodySet,
         handle: ColliderHandle,
         margins: (f32, f32),
         events: &mut Vec<BroadPhasePairEvent>,
-    ) {
+    ) -> Option<&'b RigidBody> {
         let id = handle.into_raw_parts().0;
-        let Some(collider) = colliders.get(handle) else {
-            return;
-        };
+        let collider = colliders.get(handle)?;
         let parent = collider.parent().and_then(|h| bodies.get(h));
         let enabled = collider.is_enabled();
 
-        // Fast path, the common case: a known, valid proxy whose filter inputs did not change.
-        // Either its exact box is still inside its fat box (nothing to do), or it gets a new
-        // fat box in place after the loop.
+        // Fast path, the common case: a known, valid proxy whose filter inputs did not change
+        // (the parent's body type is checked after the loop). Either its exact box is still
+        // inside its fat box (nothing to do), or it gets a new fat box in place after the loop.
         if let Some(Some(p)) = self.proxies.get_mut(id as usize) {
-            if enabled && p.handle == handle && p.is_valid() && p.filter.same_as(collider, parent) {
+            if enabled
+                && p.handle == handle
+                && p.is_valid()
+                && p.filter.same_as_but_body_type(collider, parent.is_some())
+            {
                 let tight = Self::collision_aabb(params, collider, parent);
                 self.tights[id as usize] = tight;
                 // Only proxies with candidates not live yet have anything to check in step 6
@@ -316,10 +320,36 @@ impl CanopyBroadPhase {
                     self.leavers.push(id);
                     self.leaver_count += 1;
                 }
-                return;
+                return parent;
             }
         }
         self.examine_full(params, colliders, bodies, handle, margins, events);
+        None
+    }
+
+    /// Step 2, the fast path's last check: the parent's body type, for every proxy the fast
+    /// path passed (`checks`: proxy id and parent body). It is the only field of the body on
+    /// its cache line that the broadphase reads, so it is read here in a short loop, where the
+    /// processor keeps many of those loads in flight, rather than in the long fast path, where
+    /// each one stalled it. A proxy whose body type changed gets the full examination.
+    fn check_body_types(
+        &mut self,
+        params: &IntegrationParameters,
+        colliders: &ColliderSet,
+        bodies: &RigidBodySet,
+        checks: &[(u32, &RigidBody)],
+        margins: (f32, f32),
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) {
+        for &(id, rb) in checks {
+            let Some(p) = &self.proxies[id as usize] else {
+                continue;
+            };
+            if p.filter.body_type != rb.body_type() {
+                let handle = p.handle;
+                self.examine_full(params, colliders, bodies, handle, margins, events);
+            }
+        }
     }
 
     /// Step 2 for a proxy of the fast path whose exact box left its fat box: a new fat box in
@@ -442,8 +472,10 @@ impl CanopyBroadPhase {
         }
 
         self.tights[id as usize] = tight;
-        self.is_touched[id as usize] = true;
-        self.touched.push(id);
+        if !self.is_touched[id as usize] {
+            self.is_touched[id as usize] = true;
+            self.touched.push(id);
+        }
         let mut moved = false;
         if p.filter != filter {
             let had_ff = p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED);
@@ -789,16 +821,20 @@ impl BroadPhase for CanopyBroadPhase {
             self.leavers.resize(modified_colliders.len(), 0);
         }
         self.leaver_count = 0;
+        let mut body_checks = Vec::with_capacity(modified_colliders.len());
         for (w, word) in bits.iter_mut().enumerate() {
             while *word != 0 {
                 let bit = word.trailing_zeros();
                 *word &= *word - 1;
                 let index = w as u32 * 64 + bit;
                 let handle = ColliderHandle::from_raw_parts(index, generations[index as usize]);
-                self.examine(params, colliders, bodies, handle, margins, events);
+                if let Some(rb) = self.examine(params, colliders, bodies, handle, margins, events) {
+                    body_checks.push((index, rb));
+                }
             }
         }
         self.scratch_order = (bits, generations);
+        self.check_body_types(params, colliders, bodies, &body_checks, margins, events);
         let leavers = std::mem::take(&mut self.leavers);
         for &id in &leavers[..self.leaver_count] {
             self.refatten(params, colliders, bodies, id, margins, events);

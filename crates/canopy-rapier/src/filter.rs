@@ -29,14 +29,14 @@ impl FilterData {
         }
     }
 
-    /// `self == FilterData::new(collider, parent)`, without building the new one.
+    /// `self == FilterData::new(collider, parent)` except for the parent's body type, without
+    /// building the new one. A collider without a parent counts as fixed; the body type of a
+    /// parent is left to the caller (it sits on another cache line of the body than what the
+    /// collision box reads, so the broadphase checks it in a separate pass).
     #[inline]
-    pub fn same_as(&self, collider: &Collider, parent: Option<&RigidBody>) -> bool {
+    pub fn same_as_but_body_type(&self, collider: &Collider, has_parent: bool) -> bool {
         self.parent == collider.parent()
-            && self.body_type
-                == parent
-                    .map(|b| b.body_type())
-                    .unwrap_or(RigidBodyType::Fixed)
+            && (has_parent || self.body_type == RigidBodyType::Fixed)
             && self.groups == collider.collision_groups()
             && self.active == collider.active_collision_types()
     }
