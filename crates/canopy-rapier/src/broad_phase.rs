@@ -461,7 +461,7 @@ impl CanopyBroadPhase {
                 self.stats.invalid += 1;
                 self.proxies[id as usize] = Some(p);
                 for e in self.pairs.remove_all(id) {
-                    if e.live {
+                    if e.live() {
                         self.push_delete(id, e.other, events);
                     }
                 }
@@ -917,7 +917,7 @@ impl BroadPhase for CanopyBroadPhase {
                 let tight = &self.tights[id as usize];
                 for e in self.pairs.partners(id) {
                     // A pair of two touched proxies is checked once, from its smaller id.
-                    if e.live || (e.other < id && self.is_touched[e.other as usize]) {
+                    if e.live() || (e.other < id && self.is_touched[e.other as usize]) {
                         continue;
                     }
                     if tight.intersects(&self.tights[e.other as usize]) {

@@ -6,16 +6,17 @@
 //! not live yet need checking, and per proxy a count of them says whether there are any, so
 //! resting stacks, where every candidate is live, cost nothing here.
 //!
-//! Storage: a hash map of candidate keys for "is this pair new?", per proxy the list of its
-//! candidate partners with the pair's live flag (kept in both partners' lists) and the number of
-//! its candidates not live yet, and one flat list of the candidates not live yet (the map holds
-//! each one's place in it), which the liveness pass reads front to back when many proxies have
-//! some, instead of chasing every such proxy's partner list.
+//! Storage, without a hash map: per proxy the list of its candidate partners (each pair is in
+//! both partners' lists), per proxy the number of its candidates not live yet, and one flat list
+//! of the candidates not live yet, which the liveness pass reads front to back when many proxies
+//! have some, instead of chasing every such proxy's partner list. A pair's edge in the list of
+//! its smaller id holds its place in that flat list (or [`LIVE`]); the edge in the other list
+//! only says whether it is live. "Is this pair new?" scans the shorter of the two lists.
 
-use rustc_hash::FxHashMap;
-
-/// The place in the waiting list of a candidate that is live.
+/// The place of a live candidate.
 const LIVE: u32 = u32::MAX;
+/// The place held by the edge in the larger id's list of a candidate that is not live.
+const WAITING: u32 = u32::MAX - 1;
 
 /// The two proxy ids of a key, smaller first.
 #[inline]
@@ -33,19 +34,28 @@ fn key(a: u32, b: u32) -> u64 {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Edge {
     pub other: u32,
-    pub live: bool,
+    /// [`LIVE`]; else, in the smaller id's list, the pair's index in the waiting list, and
+    /// [`WAITING`] in the other.
+    place: u32,
+}
+
+impl Edge {
+    /// `true` when the pair is live.
+    #[inline]
+    pub fn live(&self) -> bool {
+        self.place == LIVE
+    }
 }
 
 #[derive(Clone, Debug, Default)]
 pub(crate) struct PairSet {
-    /// Candidate key -> its index in `waiting_list`, or [`LIVE`].
-    candidates: FxHashMap<u64, u32>,
     /// Keys of the candidates that are not live, in no particular order.
     waiting_list: Vec<u64>,
     adjacency: Vec<Vec<Edge>>,
     /// Per proxy: number of its candidates that are not live.
     waiting: Vec<u32>,
     live: usize,
+    candidates: usize,
 }
 
 impl PairSet {
@@ -56,16 +66,15 @@ impl PairSet {
 
     /// Number of candidate pairs (live or not).
     pub fn candidate_len(&self) -> usize {
-        self.candidates.len()
+        self.candidates
     }
 
-    fn adj_mut(&mut self, a: u32) -> &mut Vec<Edge> {
+    fn grow(&mut self, a: u32) {
         let a = a as usize;
         if a >= self.adjacency.len() {
             self.adjacency.resize_with(a + 1, Vec::new);
             self.waiting.resize(a + 1, 0);
         }
-        &mut self.adjacency[a]
     }
 
     /// Number of candidates of `a` that are not live yet.
@@ -80,73 +89,81 @@ impl PairSet {
         }
     }
 
+    /// Index of `b` in the partner list of `a`.
+    #[inline]
+    fn find(&self, a: u32, b: u32) -> Option<usize> {
+        self.partners(a).iter().position(|e| e.other == b)
+    }
+
     /// `true` when `a`-`b` is a live pair.
     pub fn is_live(&self, a: u32, b: u32) -> bool {
-        self.partners(a).iter().any(|e| e.other == b && e.live)
+        self.partners(a).iter().any(|e| e.other == b && e.live())
     }
 
     /// Adds a candidate (not live); `false` when it was already there.
     pub fn insert(&mut self, a: u32, b: u32) -> bool {
-        let k = key(a, b);
-        let place = self.waiting_list.len() as u32;
-        match self.candidates.entry(k) {
-            std::collections::hash_map::Entry::Occupied(_) => return false,
-            std::collections::hash_map::Entry::Vacant(v) => {
-                v.insert(place);
-            }
+        self.grow(a.max(b));
+        let (short, long) = if self.adjacency[a as usize].len() <= self.adjacency[b as usize].len()
+        {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        if self.find(short, long).is_some() {
+            return false;
         }
-        self.waiting_list.push(k);
-        self.adj_mut(a).push(Edge {
-            other: b,
-            live: false,
-        });
-        self.adj_mut(b).push(Edge {
-            other: a,
-            live: false,
+        let (lo, hi) = (a.min(b), a.max(b));
+        let place = self.waiting_list.len() as u32;
+        self.waiting_list.push(key(a, b));
+        self.adjacency[lo as usize].push(Edge { other: hi, place });
+        self.adjacency[hi as usize].push(Edge {
+            other: lo,
+            place: WAITING,
         });
         self.count_waiting(a, b, 1);
+        self.candidates += 1;
         true
     }
 
-    /// Sets the live flag of candidate `a`-`b`; returns the previous flag.
+    /// Sets the live flag of candidate `a`-`b`; returns the previous flag (`false`, and nothing
+    /// changes, when `a`-`b` is not a candidate).
     pub fn set_live(&mut self, a: u32, b: u32, live: bool) -> bool {
-        let mut was = false;
-        for (x, y) in [(a, b), (b, a)] {
-            if let Some(e) = self.adj_mut(x).iter_mut().find(|e| e.other == y) {
-                was = e.live;
-                e.live = live;
-            }
+        let (lo, hi) = (a.min(b), a.max(b));
+        let (Some(i), Some(j)) = (self.find(lo, hi), self.find(hi, lo)) else {
+            return false;
+        };
+        let place = self.adjacency[lo as usize][i].place;
+        let was = place == LIVE;
+        if was == live {
+            return was;
         }
-        if was != live {
-            let k = key(a, b);
-            if live {
-                self.live += 1;
-                self.count_waiting(a, b, -1);
-                if let Some(at) = self.candidates.get_mut(&k) {
-                    let i = std::mem::replace(at, LIVE);
-                    self.drop_waiting(i);
-                }
-            } else {
-                self.live -= 1;
-                self.count_waiting(a, b, 1);
-                let place = self.waiting_list.len() as u32;
-                self.waiting_list.push(k);
-                self.candidates.insert(k, place);
-            }
+        if live {
+            self.live += 1;
+            self.count_waiting(a, b, -1);
+            self.adjacency[lo as usize][i].place = LIVE;
+            self.adjacency[hi as usize][j].place = LIVE;
+            self.drop_waiting(place);
+        } else {
+            self.live -= 1;
+            self.count_waiting(a, b, 1);
+            self.adjacency[lo as usize][i].place = self.waiting_list.len() as u32;
+            self.adjacency[hi as usize][j].place = WAITING;
+            self.waiting_list.push(key(a, b));
         }
         was
     }
 
-    /// Takes entry `i` out of the waiting list (nothing for [`LIVE`]); the key moved into its
-    /// place gets its new index in the map.
+    /// Takes entry `i` out of the waiting list; the key moved into its place gets its new
+    /// index in its smaller id's edge.
     fn drop_waiting(&mut self, i: u32) {
-        if i == LIVE {
-            return;
-        }
         self.waiting_list.swap_remove(i as usize);
         if let Some(&moved) = self.waiting_list.get(i as usize) {
-            if let Some(m) = self.candidates.get_mut(&moved) {
-                *m = i;
+            let (lo, hi) = unkey(moved);
+            if let Some(e) = self.adjacency[lo as usize]
+                .iter_mut()
+                .find(|e| e.other == hi)
+            {
+                e.place = i;
             }
         }
     }
@@ -158,20 +175,18 @@ impl PairSet {
 
     /// Removes candidate `a`-`b`; returns whether it was live (`None` when it was not there).
     pub fn remove(&mut self, a: u32, b: u32) -> Option<bool> {
-        let i = self.candidates.remove(&key(a, b))?;
-        self.drop_waiting(i);
-        let mut live = false;
-        for (x, y) in [(a, b), (b, a)] {
-            let adj = self.adj_mut(x);
-            if let Some(i) = adj.iter().position(|e| e.other == y) {
-                live = adj[i].live;
-                adj.swap_remove(i);
-            }
-        }
+        let (lo, hi) = (a.min(b), a.max(b));
+        let i = self.find(lo, hi)?;
+        let j = self.find(hi, lo)?;
+        let place = self.adjacency[lo as usize].swap_remove(i).place;
+        self.adjacency[hi as usize].swap_remove(j);
+        self.candidates -= 1;
+        let live = place == LIVE;
         if live {
             self.live -= 1;
         } else {
             self.count_waiting(a, b, -1);
+            self.drop_waiting(place);
         }
         Some(live)
     }
@@ -187,22 +202,10 @@ impl PairSet {
     /// Removes every candidate of `a`; returns the former partners (with live flags), in list
     /// order.
     pub fn remove_all(&mut self, a: u32) -> Vec<Edge> {
-        let partners = std::mem::take(self.adj_mut(a));
+        let partners = self.partners(a).to_vec();
         for e in &partners {
-            if let Some(i) = self.candidates.remove(&key(a, e.other)) {
-                self.drop_waiting(i);
-            }
-            let adj = self.adj_mut(e.other);
-            if let Some(i) = adj.iter().position(|f| f.other == a) {
-                adj.swap_remove(i);
-            }
-            if e.live {
-                self.live -= 1;
-            } else {
-                self.waiting[e.other as usize] -= 1;
-            }
+            self.remove(a, e.other);
         }
-        self.waiting[a as usize] = 0;
         partners
     }
 
@@ -210,7 +213,7 @@ impl PairSet {
     pub fn live_pairs(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
         self.adjacency.iter().enumerate().flat_map(|(a, adj)| {
             adj.iter()
-                .filter(move |e| e.live && (a as u32) < e.other)
+                .filter(move |e| e.live() && (a as u32) < e.other)
                 .map(move |e| (a as u32, e.other))
         })
     }
@@ -268,7 +271,7 @@ mod tests {
                         let mut gone: Vec<(u32, bool)> = set
                             .remove_all(a)
                             .iter()
-                            .map(|e| (e.other, e.live))
+                            .map(|e| (e.other, e.live()))
                             .collect();
                         gone.sort();
                         let mut expected = Vec::new();
@@ -297,7 +300,7 @@ mod tests {
                     let w = model.iter().filter(|(&(x, y), &l)| !l && (x == id || y == id)).count();
                     prop_assert_eq!(set.waiting(id) as usize, w);
                     let mut partners: Vec<(u32, bool)> =
-                        set.partners(id).iter().map(|e| (e.other, e.live)).collect();
+                        set.partners(id).iter().map(|e| (e.other, e.live())).collect();
                     partners.sort();
                     let mut expected: Vec<(u32, bool)> = model
                         .iter()
