@@ -13,7 +13,8 @@
 //!    of at most `max_leaf_size` primitives become leaves. Boxes come bottom-up on the way back;
 //!    the halves of large ranges run in parallel with `rayon::join`.
 
-use super::{append_subtree, box_ok, centroid, radix_sort::radix_sort_keys, Bounds, BuildOptions};
+use super::f4::{aabb_box, F4};
+use super::{append_subtree, radix_sort::radix_sort_keys, Bounds, BuildOptions};
 use crate::aabb::Aabb;
 use crate::bvh::{Bvh, Node, PrimBounds};
 use rayon::prelude::*;
@@ -70,20 +71,16 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
             *v = scale / e;
         }
     }
-    let key = |i: usize, a: &Aabb| -> u64 {
-        let c = centroid(&a.min_array(), &a.max_array());
-        // Finite input: `max`/`min` need no NaN care; the float-to-int cast saturates.
-        let q = |k: usize| ((c[k] - cb.min[k]) * mul[k]).max(0.0).min(scale) as u32;
-        (morton_encode_lut(q(0), q(1), q(2)) << index_bits) | i as u64
+    let km = KeyMap {
+        origin: F4::new(cb.min[0], cb.min[1], cb.min[2], 0.0),
+        mul: F4::new(mul[0], mul[1], mul[2], 0.0),
+        scale: F4::splat(scale),
+        index_bits,
     };
-    let mut keys: Vec<u64> = if parallel {
-        aabbs
-            .par_iter()
-            .enumerate()
-            .map(|(i, a)| key(i, a))
-            .collect()
+    let mut keys = if bits > SPREAD_BITS {
+        km.keys::<true>(aabbs, parallel)
     } else {
-        aabbs.iter().enumerate().map(|(i, a)| key(i, a)).collect()
+        km.keys::<false>(aabbs, parallel)
     };
 
     // 2. Sort on the code bits, then gather indices and boxes in leaf order.
@@ -170,24 +167,89 @@ fn prefetch<T>(r: &T) {
     let _ = r;
 }
 
-/// Centroid bounds of `aabbs`, and whether every box is valid.
+/// Centroid bounds of `aabbs`, and whether every box is valid ([`super::box_ok`]).
 fn centroid_bounds(aabbs: &[Aabb]) -> (Bounds, bool) {
-    let mut b = Bounds::EMPTY;
-    let mut ok = true;
+    let half = F4::splat(0.5);
+    let big = F4::splat(f32::MAX);
+    let (mut lo_acc, mut hi_acc) = (F4::splat(f32::INFINITY), F4::splat(f32::NEG_INFINITY));
+    let mut ok = F4::mask(true);
     for a in aabbs {
-        ok &= box_ok(a);
-        b.grow_point(&centroid(&a.min_array(), &a.max_array()));
+        let (lo, hi) = aabb_box(a);
+        ok = ok
+            .and(lo.le(hi))
+            .and(lo.abs().le(big))
+            .and(hi.abs().le(big));
+        // Centroids `min / 2 + max / 2` (no overflow near `f32::MAX`); `c.min(acc)` keeps
+        // `acc` on ties, as `Bounds::grow` does.
+        let c = lo.mul(half).add(hi.mul(half));
+        lo_acc = c.min(lo_acc);
+        hi_acc = c.max(hi_acc);
     }
-    (b, ok)
+    let (l, h) = (lo_acc.to_array(), hi_acc.to_array());
+    let b = Bounds {
+        min: [l[0], l[1], l[2]],
+        max: [h[0], h[1], h[2]],
+    };
+    (b, ok.bits() & 7 == 7)
 }
 
-/// Bit `i` of the index moved to bit `3 * i`, for 8-bit indices.
-const SPREAD8: [u32; 256] = {
-    let mut t = [0u32; 256];
+/// How a box becomes its sort key: the centroid, quantized in the centroid bounds (`origin`,
+/// `mul` cells per unit, at most `scale`), Morton-encoded, shifted above the index bits.
+struct KeyMap {
+    origin: F4,
+    mul: F4,
+    scale: F4,
+    index_bits: u32,
+}
+
+impl KeyMap {
+    /// The key of box `a` of index `i`. `WIDE`: codes of more than [`SPREAD_BITS`] bits per
+    /// axis.
+    #[inline(always)]
+    fn key<const WIDE: bool>(&self, i: usize, a: &Aabb) -> u64 {
+        let half = F4::splat(0.5);
+        let (lo, hi) = aabb_box(a);
+        // Finite input: the clamps need no NaN care, and the cast is in range.
+        let q = lo
+            .mul(half)
+            .add(hi.mul(half))
+            .sub(self.origin)
+            .mul(self.mul)
+            .max(F4::splat(0.0))
+            .min(self.scale)
+            .to_i32();
+        let code = morton_encode_lut::<WIDE>(q[0] as u32, q[1] as u32, q[2] as u32);
+        (code << self.index_bits) | i as u64
+    }
+
+    /// The keys of all boxes, in input order.
+    fn keys<const WIDE: bool>(&self, aabbs: &[Aabb], parallel: bool) -> Vec<u64> {
+        if parallel {
+            aabbs
+                .par_iter()
+                .enumerate()
+                .map(|(i, a)| self.key::<WIDE>(i, a))
+                .collect()
+        } else {
+            aabbs
+                .iter()
+                .enumerate()
+                .map(|(i, a)| self.key::<WIDE>(i, a))
+                .collect()
+        }
+    }
+}
+
+/// Bits per axis that one lookup in [`SPREAD`] spreads.
+const SPREAD_BITS: u32 = 11;
+
+/// Bit `i` of the index moved to bit `3 * i`, for 11-bit indices.
+static SPREAD: [u32; 1 << SPREAD_BITS] = {
+    let mut t = [0u32; 1 << SPREAD_BITS];
     let mut v = 0;
-    while v < 256 {
+    while v < t.len() {
         let mut i = 0;
-        while i < 8 {
+        while i < SPREAD_BITS {
             t[v] |= (((v >> i) & 1) as u32) << (3 * i);
             i += 1;
         }
@@ -196,14 +258,19 @@ const SPREAD8: [u32; 256] = {
     t
 };
 
-/// [`crate::morton::morton_encode`] by table, for coordinates below `2^21`.
+/// [`crate::morton::morton_encode`] by table, for coordinates below `2^21`; below
+/// `2^SPREAD_BITS` unless `WIDE`.
 #[inline(always)]
-fn morton_encode_lut(x: u32, y: u32, z: u32) -> u64 {
+fn morton_encode_lut<const WIDE: bool>(x: u32, y: u32, z: u32) -> u64 {
     let part = |s: u32| -> u64 {
-        let t = |v: u32| SPREAD8[((v >> s) & 255) as usize] as u64;
+        let t = |v: u32| SPREAD[((v >> s) as usize) & ((1 << SPREAD_BITS) - 1)] as u64;
         t(x) | (t(y) << 1) | (t(z) << 2)
     };
-    part(0) | (part(8) << 24) | (part(16) << 48)
+    if WIDE {
+        part(0) | (part(SPREAD_BITS) << (3 * SPREAD_BITS))
+    } else {
+        part(0)
+    }
 }
 
 struct Layout<'a> {
@@ -280,7 +347,12 @@ mod tests {
             s = s.wrapping_mul(1664525).wrapping_add(1013904223);
             let (x, y, z) = (s >> 11, (s >> 3) & 0x1f_ffff, s.rotate_left(7) & 0x1f_ffff);
             assert_eq!(
-                morton_encode_lut(x, y, z),
+                morton_encode_lut::<true>(x, y, z),
+                crate::morton::morton_encode(x, y, z)
+            );
+            let (x, y, z) = (x & 0x7ff, y & 0x7ff, z & 0x7ff);
+            assert_eq!(
+                morton_encode_lut::<false>(x, y, z),
                 crate::morton::morton_encode(x, y, z)
             );
         }
