@@ -13,7 +13,7 @@
 //!    of at most `max_leaf_size` primitives become leaves. Boxes come bottom-up on the way back;
 //!    the halves of large ranges run in parallel with `rayon::join`.
 
-use super::f4::{aabb_box, F4};
+use super::f4::{aabb_box, prim_box, F4};
 use super::{append_subtree, radix_sort::radix_sort_keys, Bounds, BuildOptions};
 use crate::aabb::Aabb;
 use crate::bvh::{Bvh, Node, PrimBounds};
@@ -112,8 +112,9 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
 
     // 3. Depth-first layout with bottom-up boxes. At most `2n - 1` nodes (ranges split in two
     // nonempty halves); leaves of `max_leaf_size` (4) average above 2.8 primitives on most
-    // inputs, which the estimate covers; growing past it is rare. The shrink gives back the
-    // unused end (no copy for large blocks).
+    // inputs, which the estimate covers; growing past it is rare. The unused end is given back
+    // only when it is more than an eighth of the array: shrinking copies the array (nodes are
+    // over-aligned, so no in-place `realloc`).
     let cap = (3 * n / options.max_leaf_size as usize + 1).min(2 * n - 1);
     let mut nodes = Vec::with_capacity(cap);
     let ctx = Layout {
@@ -123,7 +124,9 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
         parallel,
     };
     ctx.emit(0, n, &mut nodes);
-    nodes.shrink_to_fit();
+    if nodes.capacity() - nodes.len() > nodes.len() / 8 {
+        nodes.shrink_to_fit();
+    }
     Ok(Bvh {
         nodes,
         prim_indices,
@@ -303,18 +306,24 @@ impl Layout<'_> {
     }
 
     /// Writes the subtree over sorted primitives `lo..hi` at the end of `out`, and returns its
-    /// box.
-    fn emit(&self, lo: usize, hi: usize, out: &mut Vec<Node>) -> Bounds {
+    /// box (lane 3 junk).
+    fn emit(&self, lo: usize, hi: usize, out: &mut Vec<Node>) -> (F4, F4) {
         let count = hi - lo;
         if count <= self.max_leaf {
-            let b = Bounds::of_prims(&self.prims[lo..hi]);
-            out.push(Node::leaf(b.min, b.max, lo as u32, count as u32));
-            return b;
+            // `l.min(acc)` keeps `acc` on ties, as `Bounds::grow` does.
+            let (mut bl, mut bh) = prim_box(&self.prims[lo]);
+            for p in &self.prims[lo + 1..hi] {
+                let (l, h) = prim_box(p);
+                bl = l.min(bl);
+                bh = h.max(bh);
+            }
+            out.push(Node::leaf(xyz(bl), xyz(bh), lo as u32, count as u32));
+            return (bl, bh);
         }
         let me = out.len();
         out.push(Node::leaf([0.0; 3], [0.0; 3], lo as u32, 1)); // placeholder
         let s = self.split(lo, hi);
-        let (lb, rb, right) = if self.parallel && count >= PARALLEL_THRESHOLD {
+        let ((ll, lh), (rl, rh), right) = if self.parallel && count >= PARALLEL_THRESHOLD {
             let (lb, (rb, v)) = rayon::join(
                 || self.emit(lo, s, out),
                 || {
@@ -330,10 +339,17 @@ impl Layout<'_> {
             let rb = self.emit(s, hi, out);
             (lb, rb, right)
         };
-        let b = lb.merged(&rb);
-        out[me] = Node::interior(b.min, b.max, right);
-        b
+        let (bl, bh) = (rl.min(ll), rh.max(lh));
+        out[me] = Node::interior(xyz(bl), xyz(bh), right);
+        (bl, bh)
     }
+}
+
+/// Lanes 0..3 of `v`.
+#[inline(always)]
+fn xyz(v: F4) -> [f32; 3] {
+    let a = v.to_array();
+    [a[0], a[1], a[2]]
 }
 
 #[cfg(test)]
