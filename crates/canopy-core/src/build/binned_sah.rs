@@ -430,9 +430,18 @@ fn join(
         );
         append_subtree(out, right_nodes)
     } else {
-        build_node(lt, lb, tmp, out, ctx);
+        // Single references become leaves here, without a call.
+        if lt.src.len() == 1 {
+            lt.leaf(&lb, out);
+        } else {
+            build_node(lt, lb, tmp, out, ctx);
+        }
         let r = out.len() as u32;
-        build_node(rt, rb, tmp, out, ctx);
+        if rt.src.len() == 1 {
+            rt.leaf(&rb, out);
+        } else {
+            build_node(rt, rb, tmp, out, ctx);
+        }
         r
     };
     out[me].first = right_index;
