@@ -259,11 +259,9 @@ fn count_digits<const P: usize>(
     let buckets = mask as usize + 1;
     assert!(P <= KEY_PASSES_MAX && hist.len() >= P * buckets);
     for &k in keys {
-        for p in 0..P {
+        for (p, &s) in shifts[..P].iter().enumerate() {
             // SAFETY: `p < P` and the digit is masked below `buckets` (asserted above).
-            unsafe {
-                *hist.get_unchecked_mut(p * buckets + ((k >> shifts[p]) & mask) as usize) += 1
-            };
+            unsafe { *hist.get_unchecked_mut(p * buckets + ((k >> s) & mask) as usize) += 1 };
         }
     }
 }
