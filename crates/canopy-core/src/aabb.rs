@@ -12,6 +12,7 @@ use nalgebra::{Point3, Vector3};
 /// boxes (points, segments, flat boxes) are valid. [`Aabb::EMPTY`] is the identity of
 /// [`Aabb::merge`] and is not valid.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct Aabb {
     /// Smallest corner.
     pub min: Point3<f32>,

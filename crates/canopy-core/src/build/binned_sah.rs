@@ -25,10 +25,11 @@
 //! centroids coincide, or a node too deep (pathological inputs), is split at the object median
 //! instead, which keeps the depth, and so the recursion, bounded.
 
-use super::f4::F4;
-use super::{append_subtree, box_ok, first_invalid, BuildOptions};
+use super::f4::{aabb_box, F4};
+use super::{append_subtree, first_invalid, BuildOptions};
 use crate::aabb::Aabb;
 use crate::bvh::{Bvh, Node, PrimBounds};
+use std::mem::MaybeUninit;
 
 /// Nodes with at least this many primitives build their children in parallel.
 const PARALLEL_THRESHOLD: usize = 4096;
@@ -201,8 +202,8 @@ impl Ctx {
 struct Task<'a> {
     src: &'a mut [PrimRef],
     dst: &'a mut [PrimRef],
-    idx: &'a mut [u32],
-    bnd: &'a mut [PrimBounds],
+    idx: &'a mut [MaybeUninit<u32>],
+    bnd: &'a mut [MaybeUninit<PrimBounds>],
     first: u32,
     depth: u32,
 }
@@ -254,11 +255,11 @@ impl<'a> Task<'a> {
             .zip(self.idx.iter_mut())
             .zip(self.bnd.iter_mut())
         {
-            *i = r.index();
-            *p = PrimBounds {
+            i.write(r.index());
+            p.write(PrimBounds {
                 min: [r.min[0], r.min[1], r.min[2]],
                 max: [r.max[0], r.max[1], r.max[2]],
-            };
+            });
         }
         out.push(Node::leaf(
             b.min3(),
@@ -272,34 +273,36 @@ impl<'a> Task<'a> {
 /// Builds the tree of `aabbs` (not empty), or returns the index of the first invalid box.
 pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize> {
     let n = aabbs.len();
-    // One pass makes the references, checks the boxes and bounds them.
-    let mut ok = true;
+    // One pass makes the references, checks the boxes ([`super::box_ok`]) and bounds them.
+    let big = F4::splat(f32::MAX);
+    let lane3 = F4::new(0.0, 0.0, 0.0, f32::from_bits(u32::MAX));
+    let mut ok = F4::mask(true);
     let mut bounds = Box4::empty();
     let mut refs: Vec<PrimRef> = aabbs
         .iter()
         .enumerate()
         .map(|(i, a)| {
-            ok &= box_ok(a);
-            let r = PrimRef {
-                min: [a.min.x, a.min.y, a.min.z, f32::from_bits(i as u32)],
-                max: [a.max.x, a.max.y, a.max.z, 0.0],
-            };
-            bounds.grow(r.lo(), r.hi());
-            r
+            let (lo, hi) = aabb_box(a);
+            ok = ok
+                .and(lo.le(hi))
+                .and(lo.abs().le(big))
+                .and(hi.abs().le(big));
+            let (lo, hi) = (lo.xyz0(), hi.xyz0());
+            bounds.grow(lo, hi);
+            let lo = F4::select(lane3, F4::splat(f32::from_bits(i as u32)), lo);
+            PrimRef {
+                min: lo.to_array(),
+                max: hi.to_array(),
+            }
         })
         .collect();
-    if !ok {
+    if ok.bits() & 7 != 7 {
         return Err(first_invalid(aabbs).unwrap_or(0));
     }
     let mut scratch = vec![PrimRef::ZERO; n.min(LOCAL)];
-    let mut prim_indices = vec![0u32; n];
-    let mut prim_bounds = vec![
-        PrimBounds {
-            min: [0.0; 3],
-            max: [0.0; 3],
-        };
-        n
-    ];
+    // Every slot of the primitive arrays is written by the leaf that holds it.
+    let mut prim_indices: Vec<u32> = Vec::with_capacity(n);
+    let mut prim_bounds: Vec<PrimBounds> = Vec::with_capacity(n);
     let ctx = Ctx {
         area: AreaScale::for_root(&bounds),
         bins: options.bins as usize,
@@ -312,12 +315,18 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
     let task = Task {
         src: &mut refs,
         dst: &mut [],
-        idx: &mut prim_indices,
-        bnd: &mut prim_bounds,
+        idx: &mut prim_indices.spare_capacity_mut()[..n],
+        bnd: &mut prim_bounds.spare_capacity_mut()[..n],
         first: 0,
         depth: 0,
     };
     build_node(task, bounds, &mut scratch, &mut nodes, &ctx);
+    // SAFETY: every reference ends in one leaf (`Task::leaf` or `pair_node`), which writes
+    // its slots of both arrays; the tasks' slots partition `0..n`.
+    unsafe {
+        prim_indices.set_len(n);
+        prim_bounds.set_len(n);
+    }
     Ok(Bvh {
         nodes,
         prim_indices,
@@ -421,9 +430,18 @@ fn join(
         );
         append_subtree(out, right_nodes)
     } else {
-        build_node(lt, lb, tmp, out, ctx);
+        // Single references become leaves here, without a call.
+        if lt.src.len() == 1 {
+            lt.leaf(&lb, out);
+        } else {
+            build_node(lt, lb, tmp, out, ctx);
+        }
         let r = out.len() as u32;
-        build_node(rt, rb, tmp, out, ctx);
+        if rt.src.len() == 1 {
+            rt.leaf(&rb, out);
+        } else {
+            build_node(rt, rb, tmp, out, ctx);
+        }
         r
     };
     out[me].first = right_index;
@@ -713,12 +731,12 @@ fn pair_node(t: Task<'_>, b: Box4, out: &mut Vec<Node>, ctx: &Ctx) {
     let me = out.len() as u32;
     out.push(Node::interior(b.min3(), b.max3(), me + 2));
     for (k, r) in [r0, r1].iter().enumerate() {
-        t.idx[k] = r.index();
+        t.idx[k].write(r.index());
         let p = PrimBounds {
             min: [r.min[0], r.min[1], r.min[2]],
             max: [r.max[0], r.max[1], r.max[2]],
         };
-        t.bnd[k] = p;
+        t.bnd[k].write(p);
         out.push(Node::leaf(p.min, p.max, t.first + k as u32, 1));
     }
 }
@@ -839,12 +857,11 @@ fn stable_order(key: &[f32; SWEEP], n: usize) -> [u8; SWEEP] {
         for &k in &key[4 * c + 4..n.max(4 * c + 4)] {
             acc = acc.add(F4::splat(k).lt(ki).and(one));
         }
+        // Lanes past `n` (infinite keys, counted by index) have rank `i` and write `ord[i]`,
+        // past the ranks of the real keys: no test needed.
         let r = acc.to_i32();
         for (l, &rank) in r.iter().enumerate() {
-            let i = 4 * c + l;
-            if i < n {
-                ord[rank as usize & (SWEEP - 1)] = i as u8;
-            }
+            ord[rank as usize & (SWEEP - 1)] = (4 * c + l) as u8;
         }
     }
     ord

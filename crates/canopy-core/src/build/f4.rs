@@ -122,6 +122,11 @@ mod imp {
         pub(crate) fn and(self, o: F4) -> F4 {
             unsafe { F4(_mm_and_ps(self.0, o.0)) }
         }
+        /// Absolute values (sign bits cleared).
+        #[inline(always)]
+        pub(crate) fn abs(self) -> F4 {
+            unsafe { F4(_mm_andnot_ps(_mm_set1_ps(-0.0), self.0)) }
+        }
         /// Lanes 1, 2, 3 moved down to lanes 0, 1, 2 (lane 3 keeps lane 3).
         #[inline(always)]
         pub(crate) fn shift_down(self) -> F4 {
@@ -251,6 +256,10 @@ mod imp {
             zip(self, o, |a, b| f32::from_bits(a.to_bits() & b.to_bits()))
         }
         #[inline(always)]
+        pub(crate) fn abs(self) -> F4 {
+            F4(self.0.map(f32::abs))
+        }
+        #[inline(always)]
         pub(crate) fn shift_down(self) -> F4 {
             F4([self.0[1], self.0[2], self.0[3], self.0[3]])
         }
@@ -268,7 +277,25 @@ mod imp {
 
 pub(crate) use imp::F4;
 
+use crate::aabb::Aabb;
 use crate::bvh::{Node, PrimBounds};
+
+const _: () = assert!(std::mem::size_of::<Aabb>() == 24);
+const _: () = assert!(std::mem::offset_of!(Aabb, max) == 12);
+
+/// An input box as two vectors; lane 3 is junk (ignore it).
+#[inline(always)]
+pub(crate) fn aabb_box(a: &Aabb) -> (F4, F4) {
+    // SAFETY: `Aabb` is `repr(C)`, two `Point3<f32>` (three `f32` each, `repr(C)` in
+    // nalgebra): 24 bytes, `min` first (asserted above); bytes 0..16 are `min` and `max.x`,
+    // bytes 8..24 are `min.z` and `max`.
+    unsafe {
+        let p = a as *const Aabb as *const f32;
+        let lo = F4::load4(&*(p as *const [f32; 4]));
+        let hi = F4::load4(&*(p.add(2) as *const [f32; 4])).shift_down();
+        (lo, hi)
+    }
+}
 
 /// A node's box as two vectors; lane 3 holds the bits of `first` / `count` (ignore it).
 #[inline(always)]
@@ -337,7 +364,25 @@ mod tests {
     #[test]
     fn boxes() {
         use super::{node_box, overlap, prim_box};
+        use crate::aabb::Aabb;
         use crate::bvh::{Node, PrimBounds};
+
+        const _: () = assert!(std::mem::size_of::<Aabb>() == 24);
+        const _: () = assert!(std::mem::offset_of!(Aabb, max) == 12);
+
+        /// An input box as two vectors; lane 3 is junk (ignore it).
+        #[inline(always)]
+        pub(crate) fn aabb_box(a: &Aabb) -> (F4, F4) {
+            // SAFETY: `Aabb` is `repr(C)`, two `Point3<f32>` (three `f32` each, `repr(C)` in
+            // nalgebra): 24 bytes, `min` first (asserted above); bytes 0..16 are `min` and `max.x`,
+            // bytes 8..24 are `min.z` and `max`.
+            unsafe {
+                let p = a as *const Aabb as *const f32;
+                let lo = F4::load4(&*(p as *const [f32; 4]));
+                let hi = F4::load4(&*(p.add(2) as *const [f32; 4])).shift_down();
+                (lo, hi)
+            }
+        }
         let n = Node::leaf([1.0, 2.0, 3.0], [4.0, 5.0, 6.0], 7, 1);
         let (lo, hi) = node_box(&n);
         assert_eq!(&lo.to_array()[..3], &[1.0, 2.0, 3.0]);
@@ -354,5 +399,13 @@ mod tests {
         assert!(!overlap(lo, hi, far, far));
         let touch = F4::new(4.0, 5.0, 6.0, -1.0);
         assert!(overlap(lo, hi, touch, touch));
+        let a = crate::aabb::Aabb::from_arrays([1.0, 2.0, 3.0], [4.0, 5.0, 6.0]);
+        let (alo, ahi) = super::aabb_box(&a);
+        assert_eq!(&alo.to_array()[..3], &[1.0, 2.0, 3.0]);
+        assert_eq!(&ahi.to_array()[..3], &[4.0, 5.0, 6.0]);
+        assert_eq!(
+            F4::new(-1.0, 2.0, -0.0, -3.5).abs().to_array(),
+            [1.0, 2.0, 0.0, 3.5]
+        );
     }
 }

@@ -13,7 +13,8 @@
 //!    of at most `max_leaf_size` primitives become leaves. Boxes come bottom-up on the way back;
 //!    the halves of large ranges run in parallel with `rayon::join`.
 
-use super::{append_subtree, box_ok, centroid, radix_sort::radix_sort_keys, Bounds, BuildOptions};
+use super::f4::{aabb_box, prim_box, F4};
+use super::{append_subtree, radix_sort::radix_sort_keys, Bounds, BuildOptions};
 use crate::aabb::Aabb;
 use crate::bvh::{Bvh, Node, PrimBounds};
 use rayon::prelude::*;
@@ -70,20 +71,16 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
             *v = scale / e;
         }
     }
-    let key = |i: usize, a: &Aabb| -> u64 {
-        let c = centroid(&a.min_array(), &a.max_array());
-        // Finite input: `max`/`min` need no NaN care; the float-to-int cast saturates.
-        let q = |k: usize| ((c[k] - cb.min[k]) * mul[k]).max(0.0).min(scale) as u32;
-        (morton_encode_lut(q(0), q(1), q(2)) << index_bits) | i as u64
+    let km = KeyMap {
+        origin: F4::new(cb.min[0], cb.min[1], cb.min[2], 0.0),
+        mul: F4::new(mul[0], mul[1], mul[2], 0.0),
+        scale: F4::splat(scale),
+        index_bits,
     };
-    let mut keys: Vec<u64> = if parallel {
-        aabbs
-            .par_iter()
-            .enumerate()
-            .map(|(i, a)| key(i, a))
-            .collect()
+    let mut keys = if bits > SPREAD_BITS {
+        km.keys::<true>(aabbs, parallel)
     } else {
-        aabbs.iter().enumerate().map(|(i, a)| key(i, a)).collect()
+        km.keys::<false>(aabbs, parallel)
     };
 
     // 2. Sort on the code bits, then gather indices and boxes in leaf order.
@@ -115,8 +112,9 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
 
     // 3. Depth-first layout with bottom-up boxes. At most `2n - 1` nodes (ranges split in two
     // nonempty halves); leaves of `max_leaf_size` (4) average above 2.8 primitives on most
-    // inputs, which the estimate covers; growing past it is rare. The shrink gives back the
-    // unused end (no copy for large blocks).
+    // inputs, which the estimate covers; growing past it is rare. The unused end is given back
+    // only when it is more than an eighth of the array: shrinking copies the array (nodes are
+    // over-aligned, so no in-place `realloc`).
     let cap = (3 * n / options.max_leaf_size as usize + 1).min(2 * n - 1);
     let mut nodes = Vec::with_capacity(cap);
     let ctx = Layout {
@@ -126,7 +124,9 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
         parallel,
     };
     ctx.emit(0, n, &mut nodes);
-    nodes.shrink_to_fit();
+    if nodes.capacity() - nodes.len() > nodes.len() / 8 {
+        nodes.shrink_to_fit();
+    }
     Ok(Bvh {
         nodes,
         prim_indices,
@@ -170,24 +170,89 @@ fn prefetch<T>(r: &T) {
     let _ = r;
 }
 
-/// Centroid bounds of `aabbs`, and whether every box is valid.
+/// Centroid bounds of `aabbs`, and whether every box is valid ([`super::box_ok`]).
 fn centroid_bounds(aabbs: &[Aabb]) -> (Bounds, bool) {
-    let mut b = Bounds::EMPTY;
-    let mut ok = true;
+    let half = F4::splat(0.5);
+    let big = F4::splat(f32::MAX);
+    let (mut lo_acc, mut hi_acc) = (F4::splat(f32::INFINITY), F4::splat(f32::NEG_INFINITY));
+    let mut ok = F4::mask(true);
     for a in aabbs {
-        ok &= box_ok(a);
-        b.grow_point(&centroid(&a.min_array(), &a.max_array()));
+        let (lo, hi) = aabb_box(a);
+        ok = ok
+            .and(lo.le(hi))
+            .and(lo.abs().le(big))
+            .and(hi.abs().le(big));
+        // Centroids `min / 2 + max / 2` (no overflow near `f32::MAX`); `c.min(acc)` keeps
+        // `acc` on ties, as `Bounds::grow` does.
+        let c = lo.mul(half).add(hi.mul(half));
+        lo_acc = c.min(lo_acc);
+        hi_acc = c.max(hi_acc);
     }
-    (b, ok)
+    let (l, h) = (lo_acc.to_array(), hi_acc.to_array());
+    let b = Bounds {
+        min: [l[0], l[1], l[2]],
+        max: [h[0], h[1], h[2]],
+    };
+    (b, ok.bits() & 7 == 7)
 }
 
-/// Bit `i` of the index moved to bit `3 * i`, for 8-bit indices.
-const SPREAD8: [u32; 256] = {
-    let mut t = [0u32; 256];
+/// How a box becomes its sort key: the centroid, quantized in the centroid bounds (`origin`,
+/// `mul` cells per unit, at most `scale`), Morton-encoded, shifted above the index bits.
+struct KeyMap {
+    origin: F4,
+    mul: F4,
+    scale: F4,
+    index_bits: u32,
+}
+
+impl KeyMap {
+    /// The key of box `a` of index `i`. `WIDE`: codes of more than [`SPREAD_BITS`] bits per
+    /// axis.
+    #[inline(always)]
+    fn key<const WIDE: bool>(&self, i: usize, a: &Aabb) -> u64 {
+        let half = F4::splat(0.5);
+        let (lo, hi) = aabb_box(a);
+        // Finite input: the clamps need no NaN care, and the cast is in range.
+        let q = lo
+            .mul(half)
+            .add(hi.mul(half))
+            .sub(self.origin)
+            .mul(self.mul)
+            .max(F4::splat(0.0))
+            .min(self.scale)
+            .to_i32();
+        let code = morton_encode_lut::<WIDE>(q[0] as u32, q[1] as u32, q[2] as u32);
+        (code << self.index_bits) | i as u64
+    }
+
+    /// The keys of all boxes, in input order.
+    fn keys<const WIDE: bool>(&self, aabbs: &[Aabb], parallel: bool) -> Vec<u64> {
+        if parallel {
+            aabbs
+                .par_iter()
+                .enumerate()
+                .map(|(i, a)| self.key::<WIDE>(i, a))
+                .collect()
+        } else {
+            aabbs
+                .iter()
+                .enumerate()
+                .map(|(i, a)| self.key::<WIDE>(i, a))
+                .collect()
+        }
+    }
+}
+
+/// Bits per axis that one lookup in [`SPREAD`] spreads.
+const SPREAD_BITS: u32 = 11;
+
+/// Bit `i` of the index moved to bit `3 * i`, for 11-bit indices.
+static SPREAD: [u32; 1 << SPREAD_BITS] = {
+    let mut t = [0u32; 1 << SPREAD_BITS];
     let mut v = 0;
-    while v < 256 {
+    while v < t.len() {
         let mut i = 0;
-        while i < 8 {
+        while i < SPREAD_BITS {
             t[v] |= (((v >> i) & 1) as u32) << (3 * i);
             i += 1;
         }
@@ -196,14 +261,19 @@ const SPREAD8: [u32; 256] = {
     t
 };
 
-/// [`crate::morton::morton_encode`] by table, for coordinates below `2^21`.
+/// [`crate::morton::morton_encode`] by table, for coordinates below `2^21`; below
+/// `2^SPREAD_BITS` unless `WIDE`.
 #[inline(always)]
-fn morton_encode_lut(x: u32, y: u32, z: u32) -> u64 {
+fn morton_encode_lut<const WIDE: bool>(x: u32, y: u32, z: u32) -> u64 {
     let part = |s: u32| -> u64 {
-        let t = |v: u32| SPREAD8[((v >> s) & 255) as usize] as u64;
+        let t = |v: u32| SPREAD[((v >> s) as usize) & ((1 << SPREAD_BITS) - 1)] as u64;
         t(x) | (t(y) << 1) | (t(z) << 2)
     };
-    part(0) | (part(8) << 24) | (part(16) << 48)
+    if WIDE {
+        part(0) | (part(SPREAD_BITS) << (3 * SPREAD_BITS))
+    } else {
+        part(0)
+    }
 }
 
 struct Layout<'a> {
@@ -236,18 +306,24 @@ impl Layout<'_> {
     }
 
     /// Writes the subtree over sorted primitives `lo..hi` at the end of `out`, and returns its
-    /// box.
-    fn emit(&self, lo: usize, hi: usize, out: &mut Vec<Node>) -> Bounds {
+    /// box (lane 3 junk).
+    fn emit(&self, lo: usize, hi: usize, out: &mut Vec<Node>) -> (F4, F4) {
         let count = hi - lo;
         if count <= self.max_leaf {
-            let b = Bounds::of_prims(&self.prims[lo..hi]);
-            out.push(Node::leaf(b.min, b.max, lo as u32, count as u32));
-            return b;
+            // `l.min(acc)` keeps `acc` on ties, as `Bounds::grow` does.
+            let (mut bl, mut bh) = prim_box(&self.prims[lo]);
+            for p in &self.prims[lo + 1..hi] {
+                let (l, h) = prim_box(p);
+                bl = l.min(bl);
+                bh = h.max(bh);
+            }
+            out.push(Node::leaf(xyz(bl), xyz(bh), lo as u32, count as u32));
+            return (bl, bh);
         }
         let me = out.len();
         out.push(Node::leaf([0.0; 3], [0.0; 3], lo as u32, 1)); // placeholder
         let s = self.split(lo, hi);
-        let (lb, rb, right) = if self.parallel && count >= PARALLEL_THRESHOLD {
+        let ((ll, lh), (rl, rh), right) = if self.parallel && count >= PARALLEL_THRESHOLD {
             let (lb, (rb, v)) = rayon::join(
                 || self.emit(lo, s, out),
                 || {
@@ -263,10 +339,17 @@ impl Layout<'_> {
             let rb = self.emit(s, hi, out);
             (lb, rb, right)
         };
-        let b = lb.merged(&rb);
-        out[me] = Node::interior(b.min, b.max, right);
-        b
+        let (bl, bh) = (rl.min(ll), rh.max(lh));
+        out[me] = Node::interior(xyz(bl), xyz(bh), right);
+        (bl, bh)
     }
+}
+
+/// Lanes 0..3 of `v`.
+#[inline(always)]
+fn xyz(v: F4) -> [f32; 3] {
+    let a = v.to_array();
+    [a[0], a[1], a[2]]
 }
 
 #[cfg(test)]
@@ -280,7 +363,12 @@ mod tests {
             s = s.wrapping_mul(1664525).wrapping_add(1013904223);
             let (x, y, z) = (s >> 11, (s >> 3) & 0x1f_ffff, s.rotate_left(7) & 0x1f_ffff);
             assert_eq!(
-                morton_encode_lut(x, y, z),
+                morton_encode_lut::<true>(x, y, z),
+                crate::morton::morton_encode(x, y, z)
+            );
+            let (x, y, z) = (x & 0x7ff, y & 0x7ff, z & 0x7ff);
+            assert_eq!(
+                morton_encode_lut::<false>(x, y, z),
                 crate::morton::morton_encode(x, y, z)
             );
         }

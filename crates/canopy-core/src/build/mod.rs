@@ -165,11 +165,6 @@ impl Bounds {
     }
 
     #[inline(always)]
-    pub fn grow_point(&mut self, p: &[f32; 3]) {
-        self.grow(p, p);
-    }
-
-    #[inline(always)]
     pub fn merged(mut self, other: &Bounds) -> Bounds {
         self.grow(&other.min, &other.max);
         self
@@ -183,16 +178,6 @@ impl Bounds {
         }
         b
     }
-}
-
-/// Centroid of raw bounds, computed without overflow near `f32::MAX`.
-#[inline(always)]
-pub(crate) fn centroid(min: &[f32; 3], max: &[f32; 3]) -> [f32; 3] {
-    [
-        min[0] * 0.5 + max[0] * 0.5,
-        min[1] * 0.5 + max[1] * 0.5,
-        min[2] * 0.5 + max[2] * 0.5,
-    ]
 }
 
 /// Appends `right` (a subtree built on its own, node indices relative to its start) after

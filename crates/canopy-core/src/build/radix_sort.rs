@@ -196,12 +196,18 @@ pub(crate) fn radix_sort_keys(keys: &mut Vec<u64>, lo_bit: u32, bits: u32, paral
     }
     // One read of the keys fills the histograms of every pass; a digit that every key shares
     // (one bucket holds them all) needs no pass.
+    let mut shifts = [0u32; KEY_PASSES_MAX];
+    for (p, s) in shifts.iter_mut().enumerate().take(passes as usize) {
+        *s = lo_bit + p as u32 * width;
+    }
     let mut hist = vec![0u32; passes as usize * buckets];
-    for &k in keys.iter() {
-        for p in 0..passes {
-            // SAFETY: `p < passes` and the digit is masked below `buckets`.
-            unsafe { *hist.get_unchecked_mut(p as usize * buckets + dig(k, p)) += 1 };
-        }
+    match passes {
+        1 => count_digits::<1>(keys, &mut hist, &shifts, mask),
+        2 => count_digits::<2>(keys, &mut hist, &shifts, mask),
+        3 => count_digits::<3>(keys, &mut hist, &shifts, mask),
+        4 => count_digits::<4>(keys, &mut hist, &shifts, mask),
+        5 => count_digits::<5>(keys, &mut hist, &shifts, mask),
+        _ => count_digits::<KEY_PASSES_MAX>(keys, &mut hist, &shifts, mask),
     }
     let active: Vec<u32> = (0..passes)
         .filter(|&p| {
@@ -212,7 +218,6 @@ pub(crate) fn radix_sort_keys(keys: &mut Vec<u64>, lo_bit: u32, bits: u32, paral
     if active.is_empty() {
         return;
     }
-    tmp.resize(n, 0);
     for &p in &active {
         let offsets = &mut hist[p as usize * buckets..(p as usize + 1) * buckets];
         let mut sum = 0u32;
@@ -221,15 +226,43 @@ pub(crate) fn radix_sort_keys(keys: &mut Vec<u64>, lo_bit: u32, bits: u32, paral
             *o = sum;
             sum += c;
         }
+        let shift = shifts[p as usize];
+        let out = tmp.as_mut_ptr();
         for &k in keys.iter() {
-            let d = dig(k, p);
-            // SAFETY: `d < buckets` (masked digit).
-            let o = unsafe { offsets.get_unchecked_mut(d) };
-            // Offsets partition 0..n, so `*o < n`.
-            tmp[*o as usize] = k;
-            *o += 1;
+            let d = ((k >> shift) & mask) as usize;
+            // SAFETY: `d < buckets` (masked digit); the offsets partition `0..n`, so every slot
+            // of `tmp` (capacity `n`) is written once and `*o < n`.
+            unsafe {
+                let o = offsets.get_unchecked_mut(d);
+                out.add(*o as usize).write(k);
+                *o += 1;
+            }
         }
+        // SAFETY: all `n` slots were written above.
+        unsafe { tmp.set_len(n) };
         std::mem::swap(keys, &mut tmp);
+    }
+}
+
+/// Most passes of [`radix_sort_keys`] (64 bits in digits of at most 11).
+const KEY_PASSES_MAX: usize = 64_usize.div_ceil(KEY_DIGIT_MAX as usize);
+
+/// Adds the digits of every key to the histograms of `P` passes (`hist`: `P` blocks of
+/// `mask + 1` counts; digit `p` of `k` is `(k >> shifts[p]) & mask`).
+#[inline(never)]
+fn count_digits<const P: usize>(
+    keys: &[u64],
+    hist: &mut [u32],
+    shifts: &[u32; KEY_PASSES_MAX],
+    mask: u64,
+) {
+    let buckets = mask as usize + 1;
+    assert!(P <= KEY_PASSES_MAX && hist.len() >= P * buckets);
+    for &k in keys {
+        for (p, &s) in shifts[..P].iter().enumerate() {
+            // SAFETY: `p < P` and the digit is masked below `buckets` (asserted above).
+            unsafe { *hist.get_unchecked_mut(p * buckets + ((k >> s) & mask) as usize) += 1 };
+        }
     }
 }
 
