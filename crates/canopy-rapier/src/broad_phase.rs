@@ -627,8 +627,8 @@ impl CanopyBroadPhase {
             return;
         };
         // Its current candidates (step 4 has dropped those that ended) are found again: they
-        // are skipped here, from its own short partner list, rather than by a lookup each in the
-        // pair set's hash map.
+        // are skipped here, from its own short partner list, rather than by `PairSet::insert`
+        // (which scans the shorter of the two lists).
         let known = self.pairs.partners(id);
         for m in Mobility::ALL {
             let tree = &self.trees[m as usize];
