@@ -25,7 +25,7 @@
 //! centroids coincide, or a node too deep (pathological inputs), is split at the object median
 //! instead, which keeps the depth, and so the recursion, bounded.
 
-use super::f4::{aabb_box, F4};
+use super::f4::{aabb_box, box_ok_lanes, F4};
 use super::{append_subtree, first_invalid, BuildOptions};
 use crate::aabb::Aabb;
 use crate::bvh::{Bvh, Node, PrimBounds};
@@ -274,7 +274,6 @@ impl<'a> Task<'a> {
 pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize> {
     let n = aabbs.len();
     // One pass makes the references, checks the boxes ([`super::box_ok`]) and bounds them.
-    let big = F4::splat(f32::MAX);
     let lane3 = F4::new(0.0, 0.0, 0.0, f32::from_bits(u32::MAX));
     let mut ok = F4::mask(true);
     let mut bounds = Box4::empty();
@@ -283,10 +282,7 @@ pub(super) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, usize
         .enumerate()
         .map(|(i, a)| {
             let (lo, hi) = aabb_box(a);
-            ok = ok
-                .and(lo.le(hi))
-                .and(lo.abs().le(big))
-                .and(hi.abs().le(big));
+            ok = ok.and(box_ok_lanes(lo, hi));
             let (lo, hi) = (lo.xyz0(), hi.xyz0());
             bounds.grow(lo, hi);
             let lo = F4::select(lane3, F4::splat(f32::from_bits(i as u32)), lo);

@@ -283,18 +283,33 @@ use crate::bvh::{Node, PrimBounds};
 const _: () = assert!(std::mem::size_of::<Aabb>() == 24);
 const _: () = assert!(std::mem::offset_of!(Aabb, max) == 12);
 
-/// An input box as two vectors; lane 3 is junk (ignore it).
+/// A box stored as six `f32` (`min` then `max`) as two vectors; lane 3 is junk (ignore it).
 #[inline(always)]
-pub(crate) fn aabb_box(a: &Aabb) -> (F4, F4) {
-    // SAFETY: `Aabb` is `repr(C)`, two `Point3<f32>` (three `f32` each, `repr(C)` in
-    // nalgebra): 24 bytes, `min` first (asserted above); bytes 0..16 are `min` and `max.x`,
-    // bytes 8..24 are `min.z` and `max`.
+fn six_box(v: &[f32; 6]) -> (F4, F4) {
+    // SAFETY: bytes 0..16 are `min` and `max[0]`, bytes 8..24 are `min[2]` and `max`: both
+    // within the 24 bytes of `v`.
     unsafe {
-        let p = a as *const Aabb as *const f32;
+        let p = v.as_ptr();
         let lo = F4::load4(&*(p as *const [f32; 4]));
         let hi = F4::load4(&*(p.add(2) as *const [f32; 4])).shift_down();
         (lo, hi)
     }
+}
+
+/// An input box as two vectors; lane 3 is junk (ignore it).
+#[inline(always)]
+pub(crate) fn aabb_box(a: &Aabb) -> (F4, F4) {
+    // SAFETY: `Aabb` is `repr(C)`, two `Point3<f32>` (three `f32` each, `repr(C)` in
+    // nalgebra): 24 bytes, `min` first (asserted above), alignment 4.
+    six_box(unsafe { &*(a as *const Aabb as *const [f32; 6]) })
+}
+
+/// Lanes 0..3 all set when the box `[lo, hi]` is valid ([`super::box_ok`]: finite, `lo <= hi`);
+/// fold many boxes with `and` and test `bits() & 7 == 7`.
+#[inline(always)]
+pub(crate) fn box_ok_lanes(lo: F4, hi: F4) -> F4 {
+    let big = F4::splat(f32::MAX);
+    lo.le(hi).and(lo.abs().le(big)).and(hi.abs().le(big))
 }
 
 /// A node's box as two vectors; lane 3 holds the bits of `first` / `count` (ignore it).
@@ -311,14 +326,8 @@ pub(crate) fn node_box(n: &Node) -> (F4, F4) {
 /// A primitive's box as two vectors; lane 3 is junk (ignore it).
 #[inline(always)]
 pub(crate) fn prim_box(b: &PrimBounds) -> (F4, F4) {
-    // SAFETY: `PrimBounds` is `repr(C)`, six `f32`: bytes 0..16 are `min` and `max[0]`, bytes
-    // 8..24 are `min[2]` and `max`.
-    unsafe {
-        let p = b as *const PrimBounds as *const f32;
-        let lo = F4::load4(&*(p as *const [f32; 4]));
-        let hi = F4::load4(&*(p.add(2) as *const [f32; 4])).shift_down();
-        (lo, hi)
-    }
+    // SAFETY: `PrimBounds` is `repr(C)`, six `f32`, `min` first.
+    six_box(unsafe { &*(b as *const PrimBounds as *const [f32; 6]) })
 }
 
 /// `true` when the closed boxes `[alo, ahi]` and `[blo, bhi]` overlap (lanes 0..3).
@@ -364,25 +373,8 @@ mod tests {
     #[test]
     fn boxes() {
         use super::{node_box, overlap, prim_box};
-        use crate::aabb::Aabb;
         use crate::bvh::{Node, PrimBounds};
 
-        const _: () = assert!(std::mem::size_of::<Aabb>() == 24);
-        const _: () = assert!(std::mem::offset_of!(Aabb, max) == 12);
-
-        /// An input box as two vectors; lane 3 is junk (ignore it).
-        #[inline(always)]
-        pub(crate) fn aabb_box(a: &Aabb) -> (F4, F4) {
-            // SAFETY: `Aabb` is `repr(C)`, two `Point3<f32>` (three `f32` each, `repr(C)` in
-            // nalgebra): 24 bytes, `min` first (asserted above); bytes 0..16 are `min` and `max.x`,
-            // bytes 8..24 are `min.z` and `max`.
-            unsafe {
-                let p = a as *const Aabb as *const f32;
-                let lo = F4::load4(&*(p as *const [f32; 4]));
-                let hi = F4::load4(&*(p.add(2) as *const [f32; 4])).shift_down();
-                (lo, hi)
-            }
-        }
         let n = Node::leaf([1.0, 2.0, 3.0], [4.0, 5.0, 6.0], 7, 1);
         let (lo, hi) = node_box(&n);
         assert_eq!(&lo.to_array()[..3], &[1.0, 2.0, 3.0]);

@@ -13,7 +13,7 @@
 //!    of at most `max_leaf_size` primitives become leaves. Boxes come bottom-up on the way back;
 //!    the halves of large ranges run in parallel with `rayon::join`.
 
-use super::f4::{aabb_box, prim_box, F4};
+use super::f4::{aabb_box, box_ok_lanes, prim_box, F4};
 use super::{append_subtree, radix_sort::radix_sort_keys, Bounds, BuildOptions};
 use crate::aabb::Aabb;
 use crate::bvh::{Bvh, Node, PrimBounds};
@@ -173,15 +173,11 @@ fn prefetch<T>(r: &T) {
 /// Centroid bounds of `aabbs`, and whether every box is valid ([`super::box_ok`]).
 fn centroid_bounds(aabbs: &[Aabb]) -> (Bounds, bool) {
     let half = F4::splat(0.5);
-    let big = F4::splat(f32::MAX);
     let (mut lo_acc, mut hi_acc) = (F4::splat(f32::INFINITY), F4::splat(f32::NEG_INFINITY));
     let mut ok = F4::mask(true);
     for a in aabbs {
         let (lo, hi) = aabb_box(a);
-        ok = ok
-            .and(lo.le(hi))
-            .and(lo.abs().le(big))
-            .and(hi.abs().le(big));
+        ok = ok.and(box_ok_lanes(lo, hi));
         // Centroids `min / 2 + max / 2` (no overflow near `f32::MAX`); `c.min(acc)` keeps
         // `acc` on ties, as `Bounds::grow` does.
         let c = lo.mul(half).add(hi.mul(half));
