@@ -10,8 +10,8 @@
 //!   (children before their parent again, as in the full pass) and each one is recomputed
 //!   and marks its parent, so exactly the changed leaves and their ancestors are visited. An
 //!   interior node visited writes its two children's boxes into its entry of the wide array
-//!   (one cache line; the root's copies, `wide[0]`, are written with the root); the
-//!   four-wide copy, rarely made on the trees that take this path, is refreshed whole. The
+//!   (one cache line; the root's copies, `wide[0]`, are written with the root), and every
+//!   node visited writes its box into the four-wide copy's lane that holds it, if any. The
 //!   maps this needs (the leaf of each primitive, the parent and wide entry of each node:
 //!   [`RefitMaps`]) are made by the first partial refit after a build.
 //!
@@ -255,6 +255,7 @@ impl Bvh {
         let nodes = &mut self.nodes;
         let prims = &self.prim_bounds;
         let mut wide: Option<&mut Vec<Wide>> = self.wide.get_mut();
+        let mut r4 = self.ray4.get_mut();
         // Highest node first: a node's children (larger indices) are done before it, and the
         // parent a node marks (smaller index) comes later, in this word or a lower one.
         for k in (0..dirty.len()).rev() {
@@ -274,6 +275,9 @@ impl Bvh {
                 }
                 nodes[i].min = b.min;
                 nodes[i].max = b.max;
+                if let Some(r4) = r4.as_deref_mut() {
+                    r4.refresh_node(i, &nodes[i]);
+                }
                 if i == 0 {
                     if let Some(wide) = wide.as_deref_mut() {
                         set_copy(&mut wide[0].0[0], &nodes[0]);
@@ -288,9 +292,6 @@ impl Bvh {
                     }
                 }
             }
-        }
-        if let Some(r4) = self.ray4.get_mut() {
-            r4.refresh(&self.nodes);
         }
     }
 

@@ -24,10 +24,15 @@ pub(crate) struct ProxyTree {
     /// Proxy id of each BVH slot, or [`DEAD`].
     pub members: Vec<u32>,
     pub pending: Vec<u32>,
-    /// A tree over the pending proxies' fat boxes (primitive `i` is `pending[i]`), rebuilt by
-    /// every `maintain`; `None` from [`ProxyTree::pending_bvh`] when stale.
+    /// A tree over the pending proxies' fat boxes (primitive `i` is `pending[i]`), brought up
+    /// to date by every `maintain`: built anew when the pending list changed, refit when only
+    /// boxes did. `None` from [`ProxyTree::pending_bvh`] when stale.
     pending_bvh: Bvh,
     pending_fresh: bool,
+    /// The pending list changed (entries added, removed or moved) since `pending_bvh` was built.
+    pending_dirty: bool,
+    /// New fat boxes of pending proxies (by pending index) since `pending_bvh` was made or refit.
+    pending_changes: Vec<(u32, Aabb)>,
     pub dead: usize,
     /// Refits since the SAH cost was last compared with the cost after the build.
     refits_since_check: u32,
@@ -51,7 +56,7 @@ impl ProxyTree {
     pub fn insert(&mut self, id: u32, proxy: &mut Proxy) {
         proxy.loc = Loc::Pending(self.pending.len() as u32);
         self.pending.push(id);
-        self.pending_fresh = false;
+        self.pending_dirty = true;
         self.summary.add(&proxy.filter);
     }
 
@@ -65,7 +70,7 @@ impl ProxyTree {
             }
             Loc::Pending(i) => {
                 self.pending.swap_remove(i as usize);
-                self.pending_fresh = false;
+                self.pending_dirty = true;
                 self.pending.get(i as usize).map(|&other| (other, i))
             }
             Loc::Out => None,
@@ -76,8 +81,10 @@ impl ProxyTree {
 
     /// Records a new fat box for a proxy of this tree.
     pub fn set_box(&mut self, proxy: &Proxy) {
-        if let Loc::Tree(slot) = proxy.loc {
-            self.changes.push((slot, proxy.fat));
+        match proxy.loc {
+            Loc::Tree(slot) => self.changes.push((slot, proxy.fat)),
+            Loc::Pending(i) => self.pending_changes.push((i, proxy.fat)),
+            Loc::Out => {}
         }
     }
 
@@ -99,8 +106,25 @@ impl ProxyTree {
         parallel: bool,
     ) {
         self.maintain_members(proxies, policy, builder, parallel);
+        if self.pending.is_empty() {
+            self.pending_fresh = false;
+            self.pending_dirty = false;
+            self.pending_changes.clear();
+            return;
+        }
+        if self.pending_fresh && !self.pending_dirty {
+            // Same list: a refit, when some pending box changed, keeps the tree (and its
+            // four-wide copy) in step for less than a build.
+            let refit = self.pending_bvh.refit_primitives(&self.pending_changes);
+            self.pending_changes.clear();
+            if refit.is_ok() {
+                return;
+            }
+        }
         self.pending_fresh = false;
-        if !self.pending.is_empty() {
+        self.pending_dirty = false;
+        self.pending_changes.clear();
+        {
             let boxes: Vec<Aabb> = self
                 .pending
                 .iter()
@@ -120,7 +144,11 @@ impl ProxyTree {
 
     /// The tree over the pending proxies, when it matches them (after `maintain`).
     pub fn pending_bvh(&self) -> Option<&Bvh> {
-        (self.pending_fresh && !self.pending.is_empty()).then_some(&self.pending_bvh)
+        (self.pending_fresh
+            && !self.pending_dirty
+            && self.pending_changes.is_empty()
+            && !self.pending.is_empty())
+        .then_some(&self.pending_bvh)
     }
 
     fn maintain_members(

@@ -1,10 +1,13 @@
-//! Box overlap and point containment queries: a callback form (a walk of the tree's wide array,
-//! both children of a node in one cache line) and an iterator form (on the nodes). Both report
-//! exactly the primitives whose stored box overlaps the query (closed boxes), in the same order.
+//! Box overlap and point containment queries: a callback form (a walk of the tree's four-wide
+//! copy, four children tested at once) and an iterator form (on the binary nodes). Both report
+//! exactly the primitives whose stored box overlaps the query (closed boxes), each once, in an
+//! order fixed by the tree (not the same order for the two forms).
 
+use super::ray::INTERIOR;
 use super::Stack;
 use crate::aabb::{overlaps, Aabb};
-use crate::bvh::{wide_at, Bvh};
+use crate::build::f4::F4;
+use crate::bvh::Bvh;
 use nalgebra::Point3;
 use std::ops::Range;
 
@@ -72,7 +75,8 @@ impl Bvh {
         }
     }
 
-    /// Calls `f` with every primitive whose box overlaps `aabb` (touching counts).
+    /// Calls `f` with every primitive whose box overlaps `aabb` (touching counts), each once, in
+    /// an order that depends only on the tree.
     ///
     /// ```
     /// use canopy_core::{Aabb, Bvh, BuildOptions};
@@ -84,36 +88,53 @@ impl Bvh {
     /// # Ok::<(), canopy_core::BvhError>(())
     /// ```
     pub fn for_each_overlap(&self, aabb: &Aabb, mut f: impl FnMut(u32)) {
-        // On the wide array: both children of a node are tested from one cache line when the
-        // node is visited, and only the overlapping ones are pushed (right first), so leaves
-        // come in the same order as from `overlaps`.
-        let wide = self.wide();
-        let Some(root) = wide.first().map(|w| &w.0[0]) else {
-            return;
-        };
-        let (min, max) = (aabb.min_array(), aabb.max_array());
-        if !overlaps(&root.min, &root.max, &min, &max) {
+        // On the four-wide copy (`Node4`, shared with the ray casts and the self-pair walk):
+        // the four children of a node are tested against the query at once, one SSE compare
+        // per axis and side, and only the overlapping lanes are followed. Leaf lanes are
+        // reported as they are met, interior lanes pushed (last lane first), so the order is
+        // fixed for a given tree, though not the order of `overlaps`.
+        if self.nodes.is_empty() {
             return;
         }
+        let r4 = self.four_wide();
+        let (min, max) = (aabb.min_array(), aabb.max_array());
+        let qlo = min.map(F4::splat);
+        let qhi = max.map(F4::splat);
         let mut stack: Stack<u32> = Stack::new();
-        stack.push(0);
-        while let Some(r) = stack.pop() {
-            let e = &wide_at(wide, r as usize / 2).0[r as usize % 2];
-            if e.is_leaf() {
-                for slot in e.leaf_range() {
-                    let b = &self.prim_bounds[slot];
-                    if overlaps(&b.min, &b.max, &min, &max) {
-                        f(self.prim_indices[slot]);
+        let mut cur = 0u32;
+        loop {
+            let n = r4.at(cur as usize);
+            let mut mask = 0xf;
+            for a in 0..3 {
+                mask &= F4::load4(&n.b[a]).le_bits(qhi[a]) & qlo[a].le_bits(F4::load4(&n.b[3 + a]));
+            }
+            // Interior lanes, pushed last lane first so that the first is visited first.
+            let mut interior = 0u32;
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                match n.meta[lane] {
+                    INTERIOR => interior |= 1 << lane,
+                    1 => f(n.first[lane]),
+                    count => {
+                        let first = n.first[lane] as usize;
+                        for slot in first..first + count as usize {
+                            let b = &self.prim_bounds[slot];
+                            if overlaps(&b.min, &b.max, &min, &max) {
+                                f(self.prim_indices[slot]);
+                            }
+                        }
                     }
                 }
-                continue;
             }
-            let [left, right] = &wide_at(wide, e.first as usize).0;
-            if overlaps(&right.min, &right.max, &min, &max) {
-                stack.push(2 * e.first + 1);
+            while interior != 0 {
+                let lane = 31 - interior.leading_zeros() as usize;
+                interior &= !(1 << lane);
+                stack.push(n.first[lane]);
             }
-            if overlaps(&left.min, &left.max, &min, &max) {
-                stack.push(2 * e.first);
+            match stack.pop() {
+                Some(next) => cur = next,
+                None => return,
             }
         }
     }

@@ -330,20 +330,38 @@ impl Node4 {
 /// with that leaf as its only child). Node 0 is the root; the children of a node are stored
 /// next to each other. A leaf lane of one primitive holds the primitive's index, which no refit
 /// changes. `src[k][lane]` is the binary node whose box lane `lane` of node `k`
-/// copies (`u32::MAX` for an empty lane), for refit.
+/// copies (`u32::MAX` for an empty lane), for refit; `lane_of[i]` is the inverse, `k * 4 +
+/// lane` for binary node `i` (`u32::MAX` for a node opened in place, which no lane copies),
+/// for the partial refit.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Ray4 {
     pub(crate) nodes: Vec<Node4>,
     src: Vec<[u32; 4]>,
+    lane_of: Vec<u32>,
 }
 
 impl Ray4 {
     /// The four-wide tree of the depth-first binary `nodes` (not empty), whose leaves index
     /// `prim_indices` (slot to primitive index).
     pub(crate) fn new(nodes: &[Node], prim_indices: &[u32]) -> Self {
+        let mut r4 = Self::lanes(nodes, prim_indices);
+        r4.lane_of = vec![u32::MAX; nodes.len()];
+        for (k, src) in r4.src.iter().enumerate() {
+            for (lane, &s) in src.iter().enumerate() {
+                if s != u32::MAX {
+                    r4.lane_of[s as usize] = (k * 4 + lane) as u32;
+                }
+            }
+        }
+        r4
+    }
+
+    /// [`Ray4::new`] without `lane_of`.
+    fn lanes(nodes: &[Node], prim_indices: &[u32]) -> Self {
         let mut r4 = Ray4 {
             nodes: Vec::with_capacity(nodes.len() / 3 + 1),
             src: Vec::with_capacity(nodes.len() / 3 + 1),
+            lane_of: Vec::new(),
         };
         if nodes.is_empty() {
             return r4;
@@ -427,6 +445,16 @@ impl Ray4 {
                     n4.set_box(lane, &nodes[s as usize]);
                 }
             }
+        }
+    }
+
+    /// Copies the box of binary node `i` (`n`) into the lane that holds it, if any: the
+    /// partial refit's update, node by node.
+    #[inline(always)]
+    pub(crate) fn refresh_node(&mut self, i: usize, n: &Node) {
+        let l = self.lane_of[i];
+        if l != u32::MAX {
+            self.nodes[l as usize / 4].set_box(l as usize % 4, n);
         }
     }
 
