@@ -368,6 +368,36 @@ proptest! {
 }
 
 #[test]
+fn body_type_changes_are_seen_in_large_updates() {
+    // Body type changes that only the bodies show (no collider moved), in updates that list
+    // more colliders than one chunk of the fast path's body-type checks (256): the checks of
+    // every chunk count, not only the last one's. A grid of fixed balls, each overlapping its
+    // four neighbours (fixed-fixed pairs are filtered), of which three become dynamic.
+    let mut bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let mut handles = Vec::new();
+    for i in 0..600 {
+        let at = vector![(i % 30) as f32 * 0.9, 0.0, (i / 30) as f32 * 0.9];
+        let b = bodies.insert(RigidBodyBuilder::fixed().translation(at));
+        colliders.insert_with_parent(ColliderBuilder::ball(0.5), b, &mut bodies);
+        handles.push(b);
+    }
+    let all: Vec<ColliderHandle> = colliders.iter().map(|(h, _)| h).collect();
+    let params = IntegrationParameters::default();
+    let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
+    let mut events = Vec::new();
+    bp.update(&params, &colliders, &bodies, &all, &[], &mut events);
+    assert_eq!(bp.inner.stats().pairs, 0);
+    for i in [5, 300, 595] {
+        bodies[handles[i]].set_body_type(RigidBodyType::Dynamic, true);
+    }
+    bp.update(&params, &colliders, &bodies, &all, &[], &mut events);
+    assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+    // Each of the three pairs with its two to four neighbours.
+    assert!(bp.inner.stats().pairs >= 6, "{:?}", bp.inner.stats());
+}
+
+#[test]
 fn rebuild_heavy_policy_keeps_the_contract() {
     // Tiny pending and dead limits force rebuilds nearly every step.
     let mut config = CanopyBroadPhaseConfig::default();
