@@ -11,7 +11,10 @@
 //! of the candidates not live yet, which the liveness pass reads front to back when many proxies
 //! have some, instead of chasing every such proxy's partner list. A pair's edge in the list of
 //! its smaller id holds its place in that flat list (or [`LIVE`]); the edge in the other list
-//! only says whether it is live. "Is this pair new?" scans the shorter of the two lists.
+//! only says whether it is live. Each edge also holds the index of its twin (the same pair's
+//! edge in the other list), kept through every removal, so every lookup of a pair scans only
+//! the shorter of the two lists: a ground or a large static collider with thousands of
+//! partners is never scanned for one of them.
 
 /// The place of a live candidate.
 const LIVE: u32 = u32::MAX;
@@ -37,6 +40,8 @@ pub(crate) struct Edge {
     /// [`LIVE`]; else, in the smaller id's list, the pair's index in the waiting list, and
     /// [`WAITING`] in the other.
     place: u32,
+    /// Index of the twin edge (the same pair) in the partner list of `other`.
+    twin: u32,
 }
 
 impl Edge {
@@ -89,15 +94,35 @@ impl PairSet {
         }
     }
 
-    /// Index of `b` in the partner list of `a`.
+    /// Indices of the pair `lo`-`hi` (`lo < hi`) in the partner lists of `lo` and of `hi`,
+    /// found by scanning the shorter list and following the twin.
     #[inline]
-    fn find(&self, a: u32, b: u32) -> Option<usize> {
-        self.partners(a).iter().position(|e| e.other == b)
+    fn find(&self, lo: u32, hi: u32) -> Option<(usize, usize)> {
+        let (lo_list, hi_list) = (self.partners(lo), self.partners(hi));
+        if lo_list.len() <= hi_list.len() {
+            let i = lo_list.iter().position(|e| e.other == hi)?;
+            Some((i, lo_list[i].twin as usize))
+        } else {
+            let j = hi_list.iter().position(|e| e.other == lo)?;
+            Some((hi_list[j].twin as usize, j))
+        }
     }
 
     /// `true` when `a`-`b` is a live pair.
     pub fn is_live(&self, a: u32, b: u32) -> bool {
-        self.partners(a).iter().any(|e| e.other == b && e.live())
+        let (lo, hi) = (a.min(b), a.max(b));
+        self.find(lo, hi)
+            .is_some_and(|(i, _)| self.adjacency[lo as usize][i].live())
+    }
+
+    /// Takes edge `i` out of the partner list of `a` (swap remove), keeping the twin index of
+    /// the edge moved into its place.
+    fn take_edge(&mut self, a: u32, i: usize) -> Edge {
+        let e = self.adjacency[a as usize].swap_remove(i);
+        if let Some(&m) = self.adjacency[a as usize].get(i) {
+            self.adjacency[m.other as usize][m.twin as usize].twin = i as u32;
+        }
+        e
     }
 
     /// Adds a candidate (not live); `false` when it was already there.
@@ -109,16 +134,25 @@ impl PairSet {
         } else {
             (b, a)
         };
-        if self.find(short, long).is_some() {
+        if self.partners(short).iter().any(|e| e.other == long) {
             return false;
         }
         let (lo, hi) = (a.min(b), a.max(b));
         let place = self.waiting_list.len() as u32;
         self.waiting_list.push(key(a, b));
-        self.adjacency[lo as usize].push(Edge { other: hi, place });
+        let (i, j) = (
+            self.adjacency[lo as usize].len() as u32,
+            self.adjacency[hi as usize].len() as u32,
+        );
+        self.adjacency[lo as usize].push(Edge {
+            other: hi,
+            place,
+            twin: j,
+        });
         self.adjacency[hi as usize].push(Edge {
             other: lo,
             place: WAITING,
+            twin: i,
         });
         self.count_waiting(a, b, 1);
         self.candidates += 1;
@@ -129,7 +163,7 @@ impl PairSet {
     /// changes, when `a`-`b` is not a candidate).
     pub fn set_live(&mut self, a: u32, b: u32, live: bool) -> bool {
         let (lo, hi) = (a.min(b), a.max(b));
-        let (Some(i), Some(j)) = (self.find(lo, hi), self.find(hi, lo)) else {
+        let Some((i, j)) = self.find(lo, hi) else {
             return false;
         };
         let place = self.adjacency[lo as usize][i].place;
@@ -159,11 +193,8 @@ impl PairSet {
         self.waiting_list.swap_remove(i as usize);
         if let Some(&moved) = self.waiting_list.get(i as usize) {
             let (lo, hi) = unkey(moved);
-            if let Some(e) = self.adjacency[lo as usize]
-                .iter_mut()
-                .find(|e| e.other == hi)
-            {
-                e.place = i;
+            if let Some((k, _)) = self.find(lo, hi) {
+                self.adjacency[lo as usize][k].place = i;
             }
         }
     }
@@ -176,10 +207,9 @@ impl PairSet {
     /// Removes candidate `a`-`b`; returns whether it was live (`None` when it was not there).
     pub fn remove(&mut self, a: u32, b: u32) -> Option<bool> {
         let (lo, hi) = (a.min(b), a.max(b));
-        let i = self.find(lo, hi)?;
-        let j = self.find(hi, lo)?;
-        let place = self.adjacency[lo as usize].swap_remove(i).place;
-        self.adjacency[hi as usize].swap_remove(j);
+        let (i, j) = self.find(lo, hi)?;
+        let place = self.take_edge(lo, i).place;
+        self.take_edge(hi, j);
         self.candidates -= 1;
         let live = place == LIVE;
         if live {
@@ -309,6 +339,16 @@ mod tests {
                         .collect();
                     expected.sort();
                     prop_assert_eq!(partners, expected);
+                    // Twins point at each other and agree; the smaller id's edge of a waiting
+                    // pair holds its place in the waiting list.
+                    for (k, e) in set.partners(id).iter().enumerate() {
+                        let twin = set.partners(e.other)[e.twin as usize];
+                        prop_assert_eq!((twin.other, twin.twin as usize), (id, k));
+                        prop_assert_eq!(twin.live(), e.live());
+                        if id < e.other && !e.live() {
+                            prop_assert_eq!(set.waiting_list()[e.place as usize], key(id, e.other));
+                        }
+                    }
                 }
             }
         }
