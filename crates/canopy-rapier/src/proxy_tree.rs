@@ -1,8 +1,8 @@
 //! One tree of proxies (fixed, kinematic or dynamic): a canopy-core [`Bvh`] over fat boxes,
-//! a pending list (with a small tree rebuilt every update) for proxies added since the last
-//! build, and dead slots for proxies removed since then. Refit when boxes change; rebuilt when
-//! the pending list or the dead slots grow too large, or the SAH cost has drifted (see
-//! [`crate::RebuildPolicy`]).
+//! a pending list (with a small tree, refit or rebuilt every update) for proxies added since
+//! the last build, and dead slots for proxies removed since then. Refit when boxes change;
+//! rebuilt when the pending list or the dead slots grow too large, or the SAH cost has drifted
+//! (see [`crate::RebuildPolicy`]).
 
 use crate::config::RebuildPolicy;
 use crate::filter::TreeFilterSummary;
@@ -124,21 +124,19 @@ impl ProxyTree {
         self.pending_fresh = false;
         self.pending_dirty = false;
         self.pending_changes.clear();
-        {
-            let boxes: Vec<Aabb> = self
-                .pending
-                .iter()
-                .map(|&id| proxies[id as usize].as_ref().map_or(Aabb::EMPTY, |p| p.fat))
-                .collect();
-            let options = BuildOptions {
-                builder: Builder::Lbvh,
-                parallel: false,
-                ..Default::default()
-            };
-            if let Ok(bvh) = Bvh::build(&boxes, options) {
-                self.pending_bvh = bvh;
-                self.pending_fresh = true;
-            }
+        let boxes: Vec<Aabb> = self
+            .pending
+            .iter()
+            .map(|&id| proxies[id as usize].as_ref().map_or(Aabb::EMPTY, |p| p.fat))
+            .collect();
+        let options = BuildOptions {
+            builder: Builder::Lbvh,
+            parallel: false,
+            ..Default::default()
+        };
+        if let Ok(bvh) = Bvh::build(&boxes, options) {
+            self.pending_bvh = bvh;
+            self.pending_fresh = true;
         }
     }
 
