@@ -6,7 +6,7 @@
 use super::ray::INTERIOR;
 use super::Stack;
 use crate::aabb::{overlaps, Aabb};
-use crate::build::f4::F4;
+use crate::build::f4::{aabb_box, overlap, prim_box, F4};
 use crate::bvh::Bvh;
 use nalgebra::Point3;
 use std::ops::Range;
@@ -100,6 +100,7 @@ impl Bvh {
         let (min, max) = (aabb.min_array(), aabb.max_array());
         let qlo = min.map(F4::splat);
         let qhi = max.map(F4::splat);
+        let q4 = aabb_box(aabb);
         let mut stack: Stack<u32> = Stack::new();
         let mut cur = 0u32;
         loop {
@@ -117,10 +118,11 @@ impl Bvh {
                     INTERIOR => interior |= 1 << lane,
                     1 => f(n.first[lane]),
                     count => {
+                        // One SSE test per primitive, one branch on its result.
                         let first = n.first[lane] as usize;
                         for slot in first..first + count as usize {
-                            let b = &self.prim_bounds[slot];
-                            if overlaps(&b.min, &b.max, &min, &max) {
+                            let (blo, bhi) = prim_box(&self.prim_bounds[slot]);
+                            if overlap(blo, bhi, q4.0, q4.1) {
                                 f(self.prim_indices[slot]);
                             }
                         }
