@@ -128,16 +128,10 @@ impl PairSet {
     /// Adds a candidate (not live); `false` when it was already there.
     pub fn insert(&mut self, a: u32, b: u32) -> bool {
         self.grow(a.max(b));
-        let (short, long) = if self.adjacency[a as usize].len() <= self.adjacency[b as usize].len()
-        {
-            (a, b)
-        } else {
-            (b, a)
-        };
-        if self.partners(short).iter().any(|e| e.other == long) {
+        let (lo, hi) = (a.min(b), a.max(b));
+        if self.find(lo, hi).is_some() {
             return false;
         }
-        let (lo, hi) = (a.min(b), a.max(b));
         let place = self.waiting_list.len() as u32;
         self.waiting_list.push(key(a, b));
         let (i, j) = (
