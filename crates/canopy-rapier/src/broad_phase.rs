@@ -400,6 +400,8 @@ impl CanopyBroadPhase {
         let tight = self.tights[id as usize];
         let fat = Self::fat_box(self.config.velocity_steps, &tight, margins, params, parent);
         if let (true, Some(p)) = (fat.is_valid(), self.proxies[id as usize].as_mut()) {
+            // Unless the full examination moved it already (filter, tree), only its box changed.
+            p.box_only = !p.moved;
             p.fat = fat;
             self.trees[p.mobility as usize].set_box(p);
             self.mark_moved(id);
@@ -465,6 +467,7 @@ impl CanopyBroadPhase {
                     mobility,
                     loc: Loc::Out,
                     moved: false,
+                    box_only: false,
                 };
                 if valid {
                     self.trees[mobility as usize].insert(id, &mut p);
@@ -527,6 +530,9 @@ impl CanopyBroadPhase {
             p.fat = fat;
             self.trees[mobility as usize].set_box(&p);
             moved = true;
+        }
+        if moved {
+            p.box_only = false;
         }
         self.proxies[id as usize] = Some(p);
         if moved {
@@ -646,24 +652,40 @@ impl CanopyBroadPhase {
         }
     }
 
-    /// Step 5 for a moved proxy when few moved: its partners among every proxy (BVH members
-    /// and pending ones), found by a query on every tree it may pair with; of two moved
-    /// proxies, the one with the smaller id reports the pair.
-    fn moved_pairs(&self, id: u32, out: &mut Vec<(u32, u32)>) {
+    /// Steps 4 and 5 for a moved proxy when few moved: its partners among every proxy (BVH
+    /// members and pending ones), found by a query on every tree it may pair with. Of two
+    /// moved proxies, the one with the smaller id reports a new pair (`out`). Its candidates
+    /// the queries did not meet ended (`gone`), as did those the filter now rejects (checked
+    /// only when more than its box changed: a filter change moves both sides, and the side
+    /// whose filter changed checks). `seen` is scratch space.
+    fn moved_pairs(
+        &self,
+        id: u32,
+        seen: &mut Vec<bool>,
+        gone: &mut Vec<(u32, u32)>,
+        out: &mut Vec<(u32, u32)>,
+    ) {
         let Some(p) = self.proxies[id as usize].as_ref().filter(|p| p.is_valid()) else {
+            // Out of the trees: its candidates were dropped when its box became invalid.
             return;
         };
-        // Its current candidates (step 4 has dropped those that ended) are found again: they
-        // are skipped here, from its own short partner list, rather than by `PairSet::insert`
-        // (which scans the shorter of the two lists).
+        // Its current candidates are met again: they are recognised here, from its own short
+        // partner list, rather than by `PairSet::insert` (which scans the shorter of the two
+        // lists), and marked as seen.
         let known = self.pairs.partners(id);
+        seen.clear();
+        seen.resize(known.len(), false);
         for m in Mobility::ALL {
             let tree = &self.trees[m as usize];
             if tree.len() == 0 || !self.may_query(p, m) {
                 continue;
             }
             tree.for_each_overlap(&self.proxies, &p.fat, |other| {
-                if other == id || known.iter().any(|e| e.other == other) {
+                if other == id {
+                    return;
+                }
+                if let Some(k) = known.iter().position(|e| e.other == other) {
+                    seen[k] = true;
                     return;
                 }
                 let Some(o) = &self.proxies[other as usize] else {
@@ -677,6 +699,36 @@ impl CanopyBroadPhase {
                 }
             });
         }
+        for (e, &met) in known.iter().zip(seen.iter()) {
+            let ended = !met
+                || (!p.box_only
+                    && self.proxies[e.other as usize]
+                        .as_ref()
+                        .is_none_or(|o| !p.filter.may_pair(&o.filter)));
+            if ended {
+                gone.push((id, e.other));
+            }
+        }
+    }
+
+    /// Step 4 when many moved: the candidates of moved proxies whose fat boxes are apart or
+    /// whose filter now rejects them.
+    fn ended_pairs(&self, moved: &[u32]) -> Vec<(u32, u32)> {
+        let mut gone = Vec::new();
+        for &id in moved {
+            let Some(p) = &self.proxies[id as usize] else {
+                continue;
+            };
+            for e in self.pairs.partners(id) {
+                let Some(o) = &self.proxies[e.other as usize] else {
+                    continue;
+                };
+                if !p.fat.intersects(&o.fat) || !p.filter.may_pair(&o.filter) {
+                    gone.push((id, e.other));
+                }
+            }
+        }
+        gone
     }
 
     /// `false` when no collider of tree `m` can pair with `p`.
@@ -696,23 +748,27 @@ impl CanopyBroadPhase {
         ta.len() > 0 && tb.len() > 0 && ta.summary.may_pair_with_tree(&tb.summary)
     }
 
-    /// Step 5: every new candidate pair of a moved proxy. With few moves, one query per moved
-    /// proxy; otherwise tree members that moved are marked and found by one marked pair walk
-    /// per pair of trees, and the pending proxies' trees are walked against the member trees.
-    fn find_new_pairs(&mut self, moved: &[u32]) -> Vec<(u32, u32)> {
+    /// Steps 4 and 5: the candidates of moved proxies that ended, and every new candidate pair
+    /// of a moved proxy. With few moves, one query per moved proxy finds both; otherwise the
+    /// partner lists of the moved proxies are checked, and tree members that moved are marked
+    /// and found by one marked pair walk per pair of trees, and the pending proxies' trees are
+    /// walked against the member trees.
+    fn find_changed_pairs(&mut self, moved: &[u32]) -> (Vec<(u32, u32)>, Vec<(u32, u32)>) {
         let members: usize = self.trees.iter().map(|t| t.members.len()).sum();
         let mut found = Vec::new();
         if moved.len() * SPARSE_MOVES < members {
             // Few moved: one query each beats any pass over whole trees.
+            let (mut gone, mut seen) = (Vec::new(), Vec::new());
             for &id in moved {
-                self.moved_pairs(id, &mut found);
+                self.moved_pairs(id, &mut seen, &mut gone, &mut found);
             }
-            return found;
+            return (gone, found);
         }
+        let gone = self.ended_pairs(moved);
         let marks = self.member_marks(moved);
         self.walk_members(&marks, &mut found);
         self.pending_pairs(&marks, &mut found);
-        found
+        (gone, found)
     }
 
     /// Marks of the moved BVH members, per tree (`None`: nothing moved there).
@@ -896,30 +952,17 @@ impl BroadPhase for CanopyBroadPhase {
             );
         }
 
-        // 4. Deletions among the pairs of moved proxies.
+        // 4. Candidates of moved proxies that ended (fat boxes apart, or the filter now rejects
+        //    them), and 5. new candidates, live at once when their exact boxes overlap. The
+        //    candidates that end are all dropped before any new one is added.
         let moved = std::mem::take(&mut self.moved);
-        let mut gone = Vec::new();
-        for &id in &moved {
-            let Some(p) = &self.proxies[id as usize] else {
-                continue;
-            };
-            for e in self.pairs.partners(id) {
-                let Some(o) = &self.proxies[e.other as usize] else {
-                    continue;
-                };
-                if !p.fat.intersects(&o.fat) || !p.filter.may_pair(&o.filter) {
-                    gone.push((id, e.other));
-                }
-            }
-        }
+        let (gone, found) = self.find_changed_pairs(&moved);
         for (a, b) in gone {
             if self.pairs.remove(a, b) == Some(true) {
                 self.push_delete(a, b, events);
             }
         }
-
-        // 5. New candidates, live at once when their exact boxes overlap.
-        for (a, b) in self.find_new_pairs(&moved) {
+        for (a, b) in found {
             if self.pairs.insert(a, b)
                 && self.tights[a as usize].intersects(&self.tights[b as usize])
             {
@@ -984,6 +1027,7 @@ impl BroadPhase for CanopyBroadPhase {
         for &id in &moved {
             if let Some(p) = self.proxies[id as usize].as_mut() {
                 p.moved = false;
+                p.box_only = false;
             }
         }
         self.stats.moved = moved.len();

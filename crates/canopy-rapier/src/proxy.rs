@@ -26,6 +26,9 @@ pub(crate) struct Proxy {
     pub loc: Loc,
     /// In the move buffer this step.
     pub moved: bool,
+    /// Moved this step only because its exact box left its fat box (`refatten`): its filter
+    /// and tree are unchanged, so its candidates' filters need no new check from its side.
+    pub box_only: bool,
 }
 
 impl Proxy {

@@ -135,6 +135,14 @@ impl BroadPhase for Checked {
                     "live pair that the narrow phase discards {a:?} {b:?}"
                 ));
             }
+            // A pair ends (`DeletePair`) once the fat boxes separate.
+            match (self.inner.fat_aabb(*a), self.inner.fat_aabb(*b)) {
+                (Some(fa), Some(fb)) if fa.intersects(&fb) => {}
+                (fa, fb) => self.violations.push(format!(
+                    "update {}: live pair {a:?} {b:?} with fat boxes apart or missing: {fa:?} {fb:?}",
+                    self.updates
+                )),
+            }
         }
     }
 }
