@@ -59,6 +59,9 @@ fn prefetch_tail(rb: &RigidBody) {
     let _ = rb;
 }
 
+/// Two proxy ids.
+type IdPair = (u32, u32);
+
 /// With fewer moved proxies than one tree member in this many, new pairs are found by one
 /// query per moved proxy instead of marked pair walks.
 const SPARSE_MOVES: usize = 8;
@@ -753,7 +756,7 @@ impl CanopyBroadPhase {
     /// partner lists of the moved proxies are checked, and tree members that moved are marked
     /// and found by one marked pair walk per pair of trees, and the pending proxies' trees are
     /// walked against the member trees.
-    fn find_changed_pairs(&mut self, moved: &[u32]) -> (Vec<(u32, u32)>, Vec<(u32, u32)>) {
+    fn find_changed_pairs(&mut self, moved: &[u32]) -> (Vec<IdPair>, Vec<IdPair>) {
         let members: usize = self.trees.iter().map(|t| t.members.len()).sum();
         let mut found = Vec::new();
         if moved.len() * SPARSE_MOVES < members {
