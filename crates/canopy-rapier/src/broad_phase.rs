@@ -966,10 +966,9 @@ impl BroadPhase for CanopyBroadPhase {
             }
         }
         for (a, b) in found {
-            if self.pairs.insert(a, b)
-                && self.tights[a as usize].intersects(&self.tights[b as usize])
-            {
-                self.pairs.set_live(a, b, true);
+            let tights = &self.tights;
+            let overlap = || tights[a as usize].intersects(&tights[b as usize]);
+            if self.pairs.insert(a, b, overlap) == Some(true) {
                 self.push_add(a, b, events);
             }
         }

@@ -125,15 +125,23 @@ impl PairSet {
         e
     }
 
-    /// Adds a candidate (not live); `false` when it was already there.
-    pub fn insert(&mut self, a: u32, b: u32) -> bool {
+    /// Adds a candidate, live when `live()` says so (asked only for a new candidate); `None`
+    /// (and nothing changes) when it was already there, else whether it went in live.
+    pub fn insert(&mut self, a: u32, b: u32, live: impl FnOnce() -> bool) -> Option<bool> {
         self.grow(a.max(b));
         let (lo, hi) = (a.min(b), a.max(b));
         if self.find(lo, hi).is_some() {
-            return false;
+            return None;
         }
-        let place = self.waiting_list.len() as u32;
-        self.waiting_list.push(key(a, b));
+        let live = live();
+        let (place, other_place) = if live {
+            self.live += 1;
+            (LIVE, LIVE)
+        } else {
+            self.waiting_list.push(key(a, b));
+            self.count_waiting(a, b, 1);
+            (self.waiting_list.len() as u32 - 1, WAITING)
+        };
         let (i, j) = (
             self.adjacency[lo as usize].len() as u32,
             self.adjacency[hi as usize].len() as u32,
@@ -145,12 +153,11 @@ impl PairSet {
         });
         self.adjacency[hi as usize].push(Edge {
             other: lo,
-            place: WAITING,
+            place: other_place,
             twin: i,
         });
-        self.count_waiting(a, b, 1);
         self.candidates += 1;
-        true
+        Some(live)
     }
 
     /// Sets the live flag of candidate `a`-`b`; returns the previous flag (`false`, and nothing
@@ -251,7 +258,7 @@ mod tests {
 
     #[derive(Clone, Debug)]
     enum Op {
-        Insert(u32, u32),
+        Insert(u32, u32, bool),
         Live(u32, u32),
         Remove(u32, u32),
         RemoveAll(u32),
@@ -260,7 +267,7 @@ mod tests {
     fn op() -> impl Strategy<Value = Op> {
         let id = 0u32..12;
         prop_oneof![
-            4 => (id.clone(), id.clone()).prop_map(|(a, b)| Op::Insert(a, b)),
+            4 => (id.clone(), id.clone(), prop::bool::ANY).prop_map(|(a, b, l)| Op::Insert(a, b, l)),
             3 => (id.clone(), id.clone()).prop_map(|(a, b)| Op::Live(a, b)),
             2 => (id.clone(), id.clone()).prop_map(|(a, b)| Op::Remove(a, b)),
             1 => id.prop_map(Op::RemoveAll),
@@ -277,10 +284,10 @@ mod tests {
             let norm = |a: u32, b: u32| (a.min(b), a.max(b));
             for op in ops {
                 match op {
-                    Op::Insert(a, b) if a != b => {
+                    Op::Insert(a, b, live) if a != b => {
                         let new = !model.contains_key(&norm(a, b));
-                        prop_assert_eq!(set.insert(a, b), new);
-                        model.entry(norm(a, b)).or_insert(false);
+                        prop_assert_eq!(set.insert(a, b, || live), new.then_some(live));
+                        model.entry(norm(a, b)).or_insert(live);
                     }
                     Op::Live(a, b) if a != b => {
                         if let Some(live) = model.get_mut(&norm(a, b)) {
