@@ -34,7 +34,10 @@ use canopy_core::{Aabb, PairMarks};
 use rapier3d::prelude::*;
 
 /// The fast path's body-type checks (`check_body_types`) run in chunks of this many colliders,
-/// so that the body lines `prefetch_tail` asked for are still in the caches when read.
+/// so that the body lines `prefetch_tail` asked for are still in the caches when read; the
+/// chunk's proxies whose exact box left their fat box get their new one (`refatten`) right
+/// after, while their collider and body are still cached too (`many_kinematics`, where one
+/// proxy in fifteen leaves: about 10% of the update, against refattening after the loop).
 const BODY_CHECK_CHUNK: usize = 256;
 
 /// Starts loading the last cache line of `rb`, where its body type sits: Rapier's `RigidBody`
@@ -380,6 +383,26 @@ impl CanopyBroadPhase {
                 self.examine_full(params, colliders, bodies, handle, margins, events);
             }
         }
+    }
+
+    /// `refatten` for the leavers recorded from index `from` on; returns the index to go on
+    /// from next time.
+    #[allow(clippy::too_many_arguments)]
+    fn refatten_since(
+        &mut self,
+        from: usize,
+        params: &IntegrationParameters,
+        colliders: &ColliderSet,
+        bodies: &RigidBodySet,
+        margins: (f32, f32),
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) -> usize {
+        let to = self.leaver_count;
+        for k in from..to {
+            let id = self.leavers[k];
+            self.refatten(params, colliders, bodies, id, margins, events);
+        }
+        to
     }
 
     /// Step 2 for a proxy of the fast path whose exact box left its fat box: a new fat box in
@@ -907,6 +930,7 @@ impl BroadPhase for CanopyBroadPhase {
             self.leavers.resize(modified_colliders.len(), 0);
         }
         self.leaver_count = 0;
+        let mut refattened = 0;
         let mut body_checks = Vec::with_capacity(BODY_CHECK_CHUNK);
         for (w, word) in bits.iter_mut().enumerate() {
             while *word != 0 {
@@ -927,17 +951,16 @@ impl BroadPhase for CanopyBroadPhase {
                             events,
                         );
                         body_checks.clear();
+                        // The chunk's leavers too, while their collider and body are cached.
+                        refattened = self
+                            .refatten_since(refattened, params, colliders, bodies, margins, events);
                     }
                 }
             }
         }
         self.scratch_order = (bits, generations);
         self.check_body_types(params, colliders, bodies, &body_checks, margins, events);
-        let leavers = std::mem::take(&mut self.leavers);
-        for &id in &leavers[..self.leaver_count] {
-            self.refatten(params, colliders, bodies, id, margins, events);
-        }
-        self.leavers = leavers;
+        self.refatten_since(refattened, params, colliders, bodies, margins, events);
 
         // 3. Trees.
         let policy = self.config.rebuild;
