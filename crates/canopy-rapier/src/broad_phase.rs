@@ -11,7 +11,8 @@
 //! 3. Trees are refit or rebuilt (`proxy_tree.rs`).
 //! 4. Deletions: only candidate pairs (fat boxes overlapping, see `pair_set.rs`) of moved
 //!    proxies are checked; a candidate goes when the fat boxes separate or the filter now
-//!    rejects it, with `DeletePair` if it was live.
+//!    rejects it, with `DeletePair` if it was live. With few moves, the queries of step 5
+//!    decide it: a candidate its moved proxy's queries no longer meet has ended.
 //! 5. New candidates. With few moves, one query per moved proxy on every tree it may pair
 //!    with (members and the pending proxies' small tree); of two moved proxies the smaller id
 //!    reports. Otherwise moved proxies are marked in their tree, and one marked pair walk per
