@@ -91,15 +91,7 @@ fn main() {
         .build()
         .expect("pool");
     pool.install(|| {
-        let mut events = Vec::new();
-        bp.update(
-            &first.params,
-            &first.colliders,
-            &first.bodies,
-            &first.modified,
-            &first.removed,
-            &mut events,
-        );
+        first.apply(bp.as_mut(), &mut Vec::new());
         let t = Instant::now();
         let events = replay(bp.as_mut(), rest);
         let secs = t.elapsed().as_secs_f64();
@@ -123,14 +115,7 @@ fn compare_ab(
 ) -> [f64; 3] {
     let mut events = Vec::new();
     for bp in bps.iter_mut() {
-        bp.update(
-            &first.params,
-            &first.colliders,
-            &first.bodies,
-            &first.modified,
-            &first.removed,
-            &mut events,
-        );
+        first.apply(*bp, &mut events);
     }
     let mut secs = [0.0; 3];
     for (i, u) in rest.iter().enumerate() {
@@ -142,17 +127,7 @@ fn compare_ab(
         };
         for k in order {
             events.clear();
-            let sets = (u.colliders.clone(), u.bodies.clone());
-            let t = Instant::now();
-            bps[k].update(
-                &u.params,
-                &sets.0,
-                &sets.1,
-                &u.modified,
-                &u.removed,
-                &mut events,
-            );
-            secs[k] += t.elapsed().as_secs_f64();
+            secs[k] += u.apply_timed_on_copies(bps[k], &mut events).as_secs_f64();
         }
     }
     secs

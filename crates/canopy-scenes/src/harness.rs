@@ -197,6 +197,40 @@ pub struct RecordedUpdate {
     pub removed: Vec<ColliderHandle>,
 }
 
+impl RecordedUpdate {
+    /// Calls `broad_phase.update` with these inputs, appending to `events`.
+    pub fn apply(&self, broad_phase: &mut dyn BroadPhase, events: &mut Vec<BroadPhasePairEvent>) {
+        broad_phase.update(
+            &self.params,
+            &self.colliders,
+            &self.bodies,
+            &self.modified,
+            &self.removed,
+            events,
+        );
+    }
+
+    /// Calls `broad_phase.update` with these inputs on fresh copies of the sets (copied
+    /// untimed: see [`replay_timed`]); returns the time of the `update` call alone.
+    pub fn apply_timed_on_copies(
+        &self,
+        broad_phase: &mut dyn BroadPhase,
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) -> std::time::Duration {
+        let sets = (self.colliders.clone(), self.bodies.clone());
+        let start = Instant::now();
+        broad_phase.update(
+            &self.params,
+            &sets.0,
+            &sets.1,
+            &self.modified,
+            &self.removed,
+            events,
+        );
+        start.elapsed()
+    }
+}
+
 /// A broadphase wrapper that records the inputs of every update (for replay in benchmarks).
 pub struct Recorder<B> {
     /// The wrapped broadphase, which still runs, so the simulation goes on as usual.
@@ -312,18 +346,7 @@ pub fn replay_timed(
     let mut total = std::time::Duration::ZERO;
     for u in updates {
         events.clear();
-        let sets = (u.colliders.clone(), u.bodies.clone());
-        let start = std::time::Instant::now();
-        broad_phase.update(
-            &u.params,
-            &sets.0,
-            &sets.1,
-            &u.modified,
-            &u.removed,
-            &mut events,
-        );
-        total += start.elapsed();
-        drop(sets);
+        total += u.apply_timed_on_copies(broad_phase, &mut events);
     }
     std::hint::black_box(events.len());
     total
@@ -335,14 +358,7 @@ pub fn replay(broad_phase: &mut dyn BroadPhase, updates: &[RecordedUpdate]) -> u
     let mut n = 0;
     for u in updates {
         events.clear();
-        broad_phase.update(
-            &u.params,
-            &u.colliders,
-            &u.bodies,
-            &u.modified,
-            &u.removed,
-            &mut events,
-        );
+        u.apply(broad_phase, &mut events);
         n += events.len();
     }
     n
