@@ -8,17 +8,19 @@
 //! the root task breadth-first into a fixed number of independent tasks, run those on rayon, and
 //! concatenate the results in task order.
 //!
-//! The plain self queries, [`Bvh::self_pairs`] and [`Bvh::par_self_pairs`], walk the
-//! four-wide copy of the tree instead (see `pairs4.rs`; the parallel one cuts the nodes into a
-//! fixed number of ranges). The serial unmarked tree-vs-tree walk (also taken by the marked
-//! self query when its marks were made for another tree) runs on the tree's wide array (both
-//! children of a node in one cache line); the others on the nodes.
+//! The self queries, plain and marked ([`Bvh::self_pairs`], [`Bvh::par_self_pairs`],
+//! [`Bvh::self_pairs_marked`], [`Bvh::par_self_pairs_marked`]), walk the four-wide copy of the
+//! tree instead (see `pairs4.rs`; the parallel ones cut the nodes into a fixed number of
+//! ranges). The serial unmarked tree-vs-tree walk (also taken by the marked self query when its
+//! marks were made for another tree) runs on the tree's wide array (both children of a node in
+//! one cache line); the others on the nodes.
 //!
 //! The `_marked` variants report only pairs with at least one *marked* primitive (a broadphase
-//! marks the proxies that moved). [`PairMarks`] summarises the marks per node, so whole
-//! subtrees without a marked primitive are skipped: one pass finds every new pair of every
-//! moved proxy, cheaper than one query per proxy once many moved.
+//! marks the proxies that moved). [`PairMarks`] summarises the marks per node (and per lane of
+//! the four-wide copy), so whole subtrees without a marked primitive are skipped: one pass finds
+//! every new pair of every moved proxy, cheaper than one query per proxy once many moved.
 
+use super::pairs4::{AllMarked, Marked};
 use crate::aabb::overlaps;
 use crate::build::f4::{node_box, overlap, prim_box};
 use crate::bvh::{wide_at, Bvh, Node, Wide};
@@ -52,6 +54,8 @@ fn half_area(n: &Node) -> f32 {
 pub struct PairMarks {
     nodes: Vec<bool>,
     slots: Vec<bool>,
+    /// Per node of the tree's four-wide copy, the lanes with a marked primitive under them.
+    lanes: Vec<u8>,
     any: bool,
 }
 
@@ -650,7 +654,7 @@ impl Bvh {
     /// ```
     pub fn self_pairs(&self, f: impl FnMut(u32, u32)) {
         if !self.nodes.is_empty() {
-            super::pairs4::self_pairs4(self, f);
+            super::pairs4::self_pairs4(self, &AllMarked, f);
         }
     }
 
@@ -675,7 +679,7 @@ impl Bvh {
         if self.nodes.is_empty() {
             return Vec::new();
         }
-        super::pairs4::par_self_pairs4(self, PARALLEL_TASKS)
+        super::pairs4::par_self_pairs4(self, &AllMarked, PARALLEL_TASKS)
     }
 
     /// Calls `f(a, b)` for every primitive `a` of `self` and `b` of `other` whose boxes
@@ -743,12 +747,33 @@ impl Bvh {
             };
         }
         let any = nodes.first().copied().unwrap_or(false);
-        PairMarks { nodes, slots, any }
+        let lanes = if self.nodes.is_empty() {
+            Vec::new()
+        } else {
+            super::pairs4::lane_marks(self, &slots, marked)
+        };
+        PairMarks {
+            nodes,
+            slots,
+            lanes,
+            any,
+        }
     }
 
     /// `marks` when it was made for this tree, else `None` (callers then treat all as marked).
     fn checked_marks<'a>(&self, marks: &'a PairMarks) -> Option<&'a PairMarks> {
-        (marks.nodes.len() == self.nodes.len() && marks.slots.len() == self.len()).then_some(marks)
+        (marks.nodes.len() == self.nodes.len()
+            && marks.slots.len() == self.len()
+            && (self.nodes.is_empty() || marks.lanes.len() == self.four_wide().nodes.len()))
+        .then_some(marks)
+    }
+
+    /// The four-wide lane marks of `m` (made for this tree).
+    pub(crate) fn lane_view<'a>(m: &'a PairMarks) -> Marked<'a> {
+        Marked {
+            lanes: &m.lanes,
+            slots: &m.slots,
+        }
     }
 
     /// [`Bvh::self_pairs`] restricted to pairs with at least one marked primitive.
@@ -769,7 +794,7 @@ impl Bvh {
             return;
         }
         match self.checked_marks(marks) {
-            Some(m) if m.any => walk::<true, _, _>(self, m, self, m, (0, 0), &mut f),
+            Some(m) if m.any => super::pairs4::self_pairs4(self, &Self::lane_view(m), f),
             Some(_) => {}
             // All marked: the walk (and order) of the plain query before it had its own.
             None => wwalk::<true>(self, self, (0, 0), &mut f),
@@ -793,7 +818,9 @@ impl Bvh {
             return Vec::new();
         }
         match self.checked_marks(marks) {
-            Some(m) if m.any => par_walk::<true, _, _>(self, m, self, m, (0, 0)),
+            Some(m) if m.any => {
+                super::pairs4::par_self_pairs4(self, &Self::lane_view(m), PARALLEL_TASKS)
+            }
             Some(_) => Vec::new(),
             // All marked: the walk (and order) of the plain query before it had its own.
             None => par_walk::<true, All, All>(self, &All, self, &All, (0, 0)),

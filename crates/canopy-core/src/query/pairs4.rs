@@ -1,5 +1,7 @@
-//! The walk of [`Bvh::self_pairs`]: the bounding volume test tree of the four-wide copy of the
-//! tree (`Ray4`, made on first use and shared with the ray casts, see `ray.rs`) against itself.
+//! The walk of [`Bvh::self_pairs`] and [`Bvh::self_pairs_marked`]: the bounding volume test
+//! tree of the four-wide copy of the tree (`Ray4`, made on first use and shared with the ray
+//! casts, see `ray.rs`) against itself. The marked walk ([`LaneMarks`]) skips nodes and lane
+//! pairs with no marked primitive under them, and primitive pairs of two unmarked ones.
 //!
 //! Every `Node4` is taken against itself once, in reverse storage order (children are stored
 //! after their parent, so a subtree's nodes are mostly visited, and still in cache, just before
@@ -148,10 +150,64 @@ const LEAF_AHEAD: usize = 4;
 /// 73 ms without, 62 with).
 const WINDOW_BYTES: usize = 1 << 20;
 
+/// Which primitives a self walk is about: per `Node4`, the lanes with a marked primitive under
+/// them; per primitive slot, whether it is marked. Pairs of two unmarked primitives are not
+/// reported, and node pairs with no marked lane are not visited.
+pub(crate) trait LaneMarks: Sync {
+    /// Everything marked (the plain walk): every check below is skipped at compile time.
+    const ALL: bool;
+    /// Bit `i` set when lane `i` of `Node4` `k` has a marked primitive under it (for a lane of
+    /// one primitive: when that primitive is marked).
+    fn lanes(&self, k: u32) -> u32;
+    /// Whether the primitive in slot `s` is marked.
+    fn slot(&self, s: usize) -> bool;
+}
+
+/// Everything marked.
+pub(crate) struct AllMarked;
+
+impl LaneMarks for AllMarked {
+    const ALL: bool = true;
+    #[inline(always)]
+    fn lanes(&self, _: u32) -> u32 {
+        0xf
+    }
+    #[inline(always)]
+    fn slot(&self, _: usize) -> bool {
+        true
+    }
+}
+
+/// Lane marks of a [`crate::PairMarks`] made for the walked tree.
+pub(crate) struct Marked<'a> {
+    pub(crate) lanes: &'a [u8],
+    pub(crate) slots: &'a [bool],
+}
+
+impl LaneMarks for Marked<'_> {
+    const ALL: bool = false;
+    #[inline(always)]
+    fn lanes(&self, k: u32) -> u32 {
+        self.lanes[k as usize] as u32
+    }
+    #[inline(always)]
+    fn slot(&self, s: usize) -> bool {
+        self.slots[s]
+    }
+}
+
+/// The lane bits of `m` rotated down by `k` within four bits (bit `i` of the result is bit
+/// `(i + k) % 4` of `m`).
+#[inline(always)]
+fn rot4(m: u32, k: u32) -> u32 {
+    ((m >> k) | (m << (4 - k))) & 0xf
+}
+
 /// The state of one self walk.
-struct Walk<'a, F> {
+struct Walk<'a, F, M> {
     t: &'a Bvh,
     r4: &'a Ray4,
+    marks: &'a M,
     /// Node-pair tasks: two different nodes whose boxes overlap.
     tasks: Vec<(u32, u32)>,
     /// Scratch stack of the primitive queries.
@@ -162,7 +218,7 @@ struct Walk<'a, F> {
     f: F,
 }
 
-impl<F: FnMut(u32, u32)> Walk<'_, F> {
+impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
     /// Pushes the task of nodes `a` and `b` (prefetching them now unless the window will).
     #[inline(always)]
     fn push(&mut self, a: u32, b: u32) {
@@ -180,6 +236,10 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
         for k in nodes.rev() {
             if self.ahead && k >= start + LEAF_AHEAD {
                 self.prefetch_leaves(k - LEAF_AHEAD);
+            }
+            if !M::ALL && self.marks.lanes(k as u32) == 0 {
+                // Every pair this node makes is of two primitives under it, none marked.
+                continue;
             }
             self.node_self(k);
             if self.ahead {
@@ -240,17 +300,22 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
     #[inline(always)]
     fn node_self(&mut self, k: usize) {
         let n = self.r4.at(k);
+        let lm = self.marks.lanes(k as u32);
         for i in 0..4 {
             let meta = n.meta[i];
-            if meta > 1 && meta != INTERIOR {
+            if meta > 1 && meta != INTERIOR && lm >> i & 1 != 0 {
                 self.leaf_self(n.first[i] as usize, meta as usize);
             }
         }
         // Lane pairs `(i, i + 1)` (all four, cyclically; bits 0..4) and `(i, i + 2)` (`i` = 0,
         // 1; bits 4..6): each pair of different lanes once.
         let r = Rows::of(n);
-        let m = r.hits(&r.rot::<1>()) | (r.hits(&r.rot::<2>()) & 0b0011) << 4;
-        self.dispatch(n, n, m, |k| (k + 1 + (k >> 2)) & 3);
+        let mut m = r.hits(&r.rot::<1>()) | (r.hits(&r.rot::<2>()) & 0b0011) << 4;
+        if !M::ALL {
+            // Only lane pairs with a marked side.
+            m &= (lm | rot4(lm, 1)) | ((lm | rot4(lm, 2)) & 0b0011) << 4;
+        }
+        self.dispatch((n, lm), (n, lm), m, |k| (k + 1 + (k >> 2)) & 3);
     }
 
     /// Nodes `a` and `b` (different, boxes overlapping) against each other.
@@ -260,50 +325,73 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
         let (na, nb) = (r4.at(a as usize), r4.at(b as usize));
         // Bit `4 * k + i`: lane `i` of `na` against lane `(i + k) % 4` of `nb`.
         let (ra, rb) = (Rows::of(na), Rows::of(nb));
-        let m = ra.hits(&rb)
+        let mut m = ra.hits(&rb)
             | ra.hits(&rb.rot::<1>()) << 4
             | ra.hits(&rb.rot::<2>()) << 8
             | ra.hits(&rb.rot::<3>()) << 12;
-        self.dispatch(na, nb, m, |k| (k + (k >> 2)) & 3);
+        let (la, lb) = (self.marks.lanes(a), self.marks.lanes(b));
+        if !M::ALL {
+            // Only lane pairs with a marked side: lane `i` of `na` marked (in every group of
+            // four bits), or lane `(i + k) % 4` of `nb` (group `k`).
+            m &= (la * 0x1111)
+                | rot4(lb, 0)
+                | rot4(lb, 1) << 4
+                | rot4(lb, 2) << 8
+                | rot4(lb, 3) << 12;
+        }
+        self.dispatch((na, la), (nb, lb), m, |k| (k + (k >> 2)) & 3);
     }
 
-    /// The overlapping lane pairs `m` of `na` and `nb`: bit `k` is lane `k % 4` of `na`
-    /// against lane `j_of(k)` of `nb`.
+    /// The overlapping lane pairs `m` of `na` and `nb` (each with its lane marks): bit `k` is
+    /// lane `k % 4` of `na` against lane `j_of(k)` of `nb`.
     #[inline(always)]
-    fn dispatch(&mut self, na: &Node4, nb: &Node4, mut m: u32, j_of: impl Fn(usize) -> usize) {
+    fn dispatch(
+        &mut self,
+        (na, la): (&Node4, u32),
+        (nb, lb): (&Node4, u32),
+        mut m: u32,
+        j_of: impl Fn(usize) -> usize,
+    ) {
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
-            self.lanes(na, k & 3, nb, j_of(k));
+            let (i, j) = (k & 3, j_of(k));
+            self.lanes(na, i, la >> i & 1 != 0, nb, j, lb >> j & 1 != 0);
         }
     }
 
-    /// Lane `i` of `na` against lane `j` of `nb`, whose boxes overlap (different subtrees).
+    /// Lane `i` of `na` against lane `j` of `nb`, whose boxes overlap (different subtrees);
+    /// `mi` and `mj` say whether each has a marked primitive under it (at least one does).
     #[inline(always)]
-    fn lanes(&mut self, na: &Node4, i: usize, nb: &Node4, j: usize) {
+    fn lanes(&mut self, na: &Node4, i: usize, mi: bool, nb: &Node4, j: usize, mj: bool) {
         match (na.meta[i] == INTERIOR, nb.meta[j] == INTERIOR) {
             (true, true) => {
                 self.push(na.first[i], nb.first[j]);
             }
-            (false, true) => self.leaf_into(na, i, nb, j),
-            (true, false) => self.leaf_into(nb, j, na, i),
+            (false, true) => self.leaf_into(na, i, mi, nb, j, mj),
+            (true, false) => self.leaf_into(nb, j, mj, na, i, mi),
             (false, false) => {
                 if na.meta[i] == 1 && nb.meta[j] == 1 {
-                    // One-primitive leaves have their primitive's box, seen to overlap.
+                    // One-primitive leaves have their primitive's box, seen to overlap (and
+                    // one of the two is marked).
                     report(na.first[i], nb.first[j], &mut self.f);
                 } else {
-                    self.leaf_leaf(na, i, nb, j);
+                    self.leaf_leaf(na, i, mi, nb, j, mj);
                 }
             }
         }
     }
 
-    /// The pairs within the leaf of `count` primitives from slot `first`.
+    /// The pairs within the leaf of `count` primitives from slot `first` (with a marked side).
     fn leaf_self(&mut self, first: usize, count: usize) {
         let t = self.t;
         for s in first..first + count {
             let (plo, phi) = prim_box(&t.prim_bounds[s]);
+            let ms = self.marks.slot(s);
             for u in s + 1..first + count {
+                if !M::ALL && !ms && !self.marks.slot(u) {
+                    continue;
+                }
                 let (ulo, uhi) = prim_box(&t.prim_bounds[u]);
                 if overlap(plo, phi, ulo, uhi) {
                     report(t.prim_indices[s], t.prim_indices[u], &mut self.f);
@@ -313,9 +401,10 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
     }
 
     /// The primitive pairs of leaf lanes `i` of `na` and `j` of `nb` (not both of one
-    /// primitive).
-    fn leaf_leaf(&mut self, na: &Node4, i: usize, nb: &Node4, j: usize) {
+    /// primitive), with a marked side.
+    fn leaf_leaf(&mut self, na: &Node4, i: usize, mi: bool, nb: &Node4, j: usize, mj: bool) {
         let t = self.t;
+        let marks = self.marks;
         let prims = |n: &Node4, lane: usize| {
             let (first, meta) = (n.first[lane] as usize, n.meta[lane] as usize);
             if meta == 1 {
@@ -332,11 +421,25 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
                 (prim_box(&t.prim_bounds[s]), t.prim_indices[s])
             }
         };
+        // Whether the primitive of slot `s` (or of a one-primitive lane) is marked; only asked
+        // of a multi-primitive leaf or when the other lane is not all marked.
+        let marked = |single: bool, s: usize, lane_marked: bool| {
+            if single {
+                lane_marked
+            } else {
+                marks.slot(s)
+            }
+        };
         let (ra, sa) = prims(na, i);
         let (rb, sb) = prims(nb, j);
+        let (la, lb) = (mi, mj);
         for s in ra {
             let ((plo, phi), ip) = get(na, i, sa, s);
+            let ms = M::ALL || marked(sa, s, la);
             for u in rb.clone() {
+                if !ms && !marked(sb, u, lb) {
+                    continue;
+                }
                 let ((ulo, uhi), iu) = get(nb, j, sb, u);
                 if overlap(plo, phi, ulo, uhi) {
                     report(ip, iu, &mut self.f);
@@ -345,35 +448,45 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
         }
     }
 
-    /// Leaf lane `i` of `nl` against interior lane `j` of `ns` (boxes overlapping): each of
-    /// the leaf's primitives whose box overlaps the lane's is queried down that subtree.
-    fn leaf_into(&mut self, nl: &Node4, i: usize, ns: &Node4, j: usize) {
+    /// Leaf lane `i` of `nl` against interior lane `j` of `ns` (boxes overlapping; `ml` and
+    /// `ms` say which has a marked primitive, at least one does): each of the leaf's
+    /// primitives whose box overlaps the lane's is queried down that subtree (an unmarked one
+    /// only when the subtree has a marked primitive).
+    fn leaf_into(&mut self, nl: &Node4, i: usize, ml: bool, ns: &Node4, j: usize, ms: bool) {
         let root = ns.first[j];
         let (first, meta) = (nl.first[i], nl.meta[i]);
         if meta == 1 {
-            self.query(&Splat::lane(nl, i), lane_box(nl, i), first, root);
+            self.query(&Splat::lane(nl, i), lane_box(nl, i), first, ml, root);
             return;
         }
         let (slo, shi) = lane_box(ns, j);
         let t = self.t;
         for s in first as usize..first as usize + meta as usize {
+            let pm = M::ALL || self.marks.slot(s);
+            if !pm && !ms {
+                continue;
+            }
             let p = &t.prim_bounds[s];
             let (plo, phi) = prim_box(p);
             if overlap(plo, phi, slo, shi) {
-                self.query(&Splat::prim(p), (plo, phi), t.prim_indices[s], root);
+                self.query(&Splat::prim(p), (plo, phi), t.prim_indices[s], pm, root);
             }
         }
     }
 
-    /// Reports the pairs of primitive `ip` (box `p`, also as `pbox`) with the primitives under
-    /// `Node4` `root` (whose box it overlaps; `ip` is not under it).
-    fn query(&mut self, p: &Splat, pbox: (F4, F4), ip: u32, root: u32) {
+    /// Reports the pairs of primitive `ip` (box `p`, also as `pbox`; marked when `pm`) with the
+    /// primitives under `Node4` `root` (whose box it overlaps; `ip` is not under it). An
+    /// unmarked `ip` only follows lanes with a marked primitive, and only reports those.
+    fn query(&mut self, p: &Splat, pbox: (F4, F4), ip: u32, pm: bool, root: u32) {
         let (t, r4) = (self.t, self.r4);
         self.qstack.clear();
         let mut cur = root;
         loop {
             let n = r4.at(cur as usize);
             let mut m = p.hits(n);
+            if !M::ALL && !pm {
+                m &= self.marks.lanes(cur);
+            }
             let mut next = None;
             while m != 0 {
                 let lane = m.trailing_zeros() as usize;
@@ -388,6 +501,9 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
                     report(ip, first, &mut self.f);
                 } else {
                     for s in first as usize..first as usize + meta as usize {
+                        if !M::ALL && !pm && !self.marks.slot(s) {
+                            continue;
+                        }
                         let (ulo, uhi) = prim_box(&t.prim_bounds[s]);
                         if overlap(pbox.0, pbox.1, ulo, uhi) {
                             report(ip, t.prim_indices[s], &mut self.f);
@@ -403,21 +519,22 @@ impl<F: FnMut(u32, u32)> Walk<'_, F> {
     }
 }
 
-/// Every overlapping pair of primitives of the non-empty tree `t`, once each, to `f`.
-pub(crate) fn self_pairs4(t: &Bvh, f: impl FnMut(u32, u32)) {
+/// Every overlapping pair of primitives of the non-empty tree `t` with a marked side (all of
+/// them with [`AllMarked`]), once each, to `f`.
+pub(crate) fn self_pairs4<M: LaneMarks>(t: &Bvh, marks: &M, f: impl FnMut(u32, u32)) {
     let r4 = t.four_wide();
-    walk(t, large(r4), 0..r4.nodes.len(), f);
+    walk(t, marks, large(r4), 0..r4.nodes.len(), f);
 }
 
 /// The pairs of [`self_pairs4`] in a `Vec`, found on the current rayon pool: the nodes are cut
 /// into `tasks` ranges (fewer in a small tree), walked independently and concatenated from the
 /// last range to the first, which is the serial order whatever the thread count.
-pub(crate) fn par_self_pairs4(t: &Bvh, tasks: usize) -> Vec<(u32, u32)> {
+pub(crate) fn par_self_pairs4<M: LaneMarks>(t: &Bvh, marks: &M, tasks: usize) -> Vec<(u32, u32)> {
     let r4 = t.four_wide();
     let (n, ahead) = (r4.nodes.len(), large(r4));
     if rayon::current_num_threads() == 1 {
         let mut out = Vec::with_capacity(t.len());
-        walk(t, ahead, 0..n, |a, b| out.push((a, b)));
+        walk(t, marks, ahead, 0..n, |a, b| out.push((a, b)));
         return out;
     }
     let tasks = tasks.clamp(1, n);
@@ -427,9 +544,13 @@ pub(crate) fn par_self_pairs4(t: &Bvh, tasks: usize) -> Vec<(u32, u32)> {
             // Range `c` from the top: nodes `n * (tasks - 1 - c) / tasks ..`.
             let cut = |i: usize| (n as u64 * i as u64 / tasks as u64) as usize;
             let mut v = Vec::new();
-            walk(t, ahead, cut(tasks - 1 - c)..cut(tasks - c), |a, b| {
-                v.push((a, b))
-            });
+            walk(
+                t,
+                marks,
+                ahead,
+                cut(tasks - 1 - c)..cut(tasks - c),
+                |a, b| v.push((a, b)),
+            );
             v
         })
         .collect();
@@ -447,16 +568,49 @@ fn large(r4: &Ray4) -> bool {
 
 /// The pairs found from the nodes `nodes` of `t` (all of them: [`self_pairs4`]), with the
 /// window on or off (`ahead`).
-fn walk(t: &Bvh, ahead: bool, nodes: std::ops::Range<usize>, f: impl FnMut(u32, u32)) {
+fn walk<M: LaneMarks>(
+    t: &Bvh,
+    marks: &M,
+    ahead: bool,
+    nodes: std::ops::Range<usize>,
+    f: impl FnMut(u32, u32),
+) {
     let mut w = Walk {
         t,
         r4: t.four_wide(),
+        marks,
         tasks: Vec::with_capacity(256),
         qstack: Vec::with_capacity(64),
         ahead,
         f,
     };
     w.run(nodes);
+}
+
+/// The lane marks of `t`'s four-wide copy for the primitive marks `slots` (per slot) and
+/// `marked` (per primitive index, for lanes of one primitive, which hold the index): one pass
+/// over the nodes, children before parents.
+pub(crate) fn lane_marks(t: &Bvh, slots: &[bool], marked: impl Fn(u32) -> bool) -> Vec<u8> {
+    let r4 = t.four_wide();
+    let mut lanes = vec![0u8; r4.nodes.len()];
+    for k in (0..r4.nodes.len()).rev() {
+        let n = r4.at(k);
+        let mut m = 0u8;
+        for i in 0..4 {
+            let (first, meta) = (n.first[i], n.meta[i]);
+            let hit = match meta {
+                0 => false,
+                INTERIOR => lanes[first as usize] != 0,
+                1 => marked(first),
+                count => slots[first as usize..(first + count) as usize]
+                    .iter()
+                    .any(|&b| b),
+            };
+            m |= (hit as u8) << i;
+        }
+        lanes[k] = m;
+    }
+    lanes
 }
 
 #[cfg(test)]
@@ -487,11 +641,46 @@ mod tests {
 
     fn sorted_pairs(t: &Bvh, ahead: bool) -> Vec<(u32, u32)> {
         let mut v = Vec::new();
-        super::walk(t, ahead, 0..t.four_wide().nodes.len(), |a, b| {
-            v.push((a, b))
-        });
+        super::walk(
+            t,
+            &super::AllMarked,
+            ahead,
+            0..t.four_wide().nodes.len(),
+            |a, b| v.push((a, b)),
+        );
         v.sort_unstable();
         v
+    }
+
+    /// The marked walk, in both modes, against brute force over the pairs with a marked side,
+    /// for marks of about `density` in four primitives.
+    fn check_marked(t: &Bvh, b: &[Aabb], density: u64) {
+        let mark = |i: u32| {
+            (i as u64)
+                .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                .rotate_left(17)
+                % 4
+                < density
+        };
+        let m = t.marks(mark);
+        let view = crate::Bvh::lane_view(&m);
+        let n = b.len();
+        let mut expect = Vec::new();
+        for i in 0..n {
+            for j in i + 1..n {
+                if b[i].intersects(&b[j]) && (mark(i as u32) || mark(j as u32)) {
+                    expect.push((i as u32, j as u32));
+                }
+            }
+        }
+        for ahead in [false, true] {
+            let mut v = Vec::new();
+            super::walk(t, &view, ahead, 0..t.four_wide().nodes.len(), |a, b| {
+                v.push((a, b))
+            });
+            v.sort_unstable();
+            assert_eq!(v, expect, "density {density}, ahead {ahead}");
+        }
     }
 
     fn check(t: &Bvh, b: &[Aabb]) {
@@ -506,6 +695,9 @@ mod tests {
         }
         assert_eq!(sorted_pairs(t, false), expect);
         assert_eq!(sorted_pairs(t, true), expect);
+        for density in 0..4 {
+            check_marked(t, b, density);
+        }
     }
 
     #[test]
@@ -577,7 +769,7 @@ mod tests {
                     .unwrap();
                 assert_eq!(pool.install(|| t.par_self_pairs()), serial);
                 for tasks in [1, 3, 256, 10_000] {
-                    let got = pool.install(|| super::par_self_pairs4(&t, tasks));
+                    let got = pool.install(|| super::par_self_pairs4(&t, &super::AllMarked, tasks));
                     assert_eq!(got, serial);
                 }
             }
