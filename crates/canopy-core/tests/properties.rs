@@ -56,6 +56,17 @@ fn box_set(max_len: usize) -> impl Strategy<Value = Vec<Aabb>> {
     ]
 }
 
+/// A box coordinate: small, often a whole number (so that faces meet), or NaN or infinite.
+fn coordinate() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        -4.0f32..4.0,
+        (-4i32..4).prop_map(|i| i as f32),
+        Just(f32::NAN),
+        Just(f32::INFINITY),
+        Just(f32::NEG_INFINITY),
+    ]
+}
+
 fn options() -> impl Strategy<Value = BuildOptions> {
     (prop::bool::ANY, 1u32..9, 2u32..33, prop::bool::ANY).prop_map(|(lbvh, leaf, bins, par)| {
         BuildOptions {
@@ -180,12 +191,24 @@ fn round_changes(cur: &mut [Aabb], kind: u8, list: &[Change]) -> Vec<(u32, Aabb)
 proptest! {
     #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
 
-    /// Rounds of `refit_primitives` (which takes the partial path for few changes and the full
-    /// one for many) against a full refit of the same tree: the same nodes to the bit once the
-    /// tree has been refit whole once (a fresh SAH tree may hold zeros of the other sign than
-    /// refit computes, which a partial refit keeps where it does not reach: the same values),
-    /// a valid tree with its wide copy exact, and box queries on both arrays, made before the
-    /// refits, exact.
+    /// The branch-free box tests answer as the short-circuit ones, touching boxes, zero-size
+    /// boxes and NaN or infinite coordinates included (the second box often reuses the first
+    /// box's coordinates, so that faces meet).
+    #[test]
+    fn branchless_box_tests_match(
+        a in prop::array::uniform6(coordinate()),
+        b in prop::array::uniform6(coordinate()),
+        reuse in prop::array::uniform6(0usize..9),
+    ) {
+        let b: [f32; 6] = std::array::from_fn(|k| if reuse[k] < 6 { a[reuse[k]] } else { b[k] });
+        let make = |v: [f32; 6]| Aabb::from_arrays([v[0], v[1], v[2]], [v[3], v[4], v[5]]);
+        let (x, y) = (make(a), make(b));
+        prop_assert_eq!(x.intersects_branchless(&y), x.intersects(&y));
+        prop_assert_eq!(y.intersects_branchless(&x), y.intersects(&x));
+        prop_assert_eq!(x.contains_branchless(&y), x.contains(&y));
+        prop_assert_eq!(y.contains_branchless(&x), y.contains(&x));
+    }
+
     #[test]
     fn partial_refit_rounds_match_the_full_refit(
         boxes in box_set(300),

@@ -1011,8 +1011,10 @@ impl BroadPhase for CanopyBroadPhase {
         if checks * 2 >= self.pairs.waiting_list().len() {
             for &k in self.pairs.waiting_list() {
                 let (a, b) = unkey(k);
+                // Without early exits: a partial overlap along one axis is common among
+                // waiting candidates, and each early exit mispredicted (spawn_storm: ~3%).
                 if (self.is_touched[a as usize] || self.is_touched[b as usize])
-                    && self.tights[a as usize].intersects(&self.tights[b as usize])
+                    && self.tights[a as usize].intersects_branchless(&self.tights[b as usize])
                 {
                     flips.push((a, b));
                 }
@@ -1028,7 +1030,7 @@ impl BroadPhase for CanopyBroadPhase {
                     if e.live() || (e.other < id && self.is_touched[e.other as usize]) {
                         continue;
                     }
-                    if tight.intersects(&self.tights[e.other as usize]) {
+                    if tight.intersects_branchless(&self.tights[e.other as usize]) {
                         flips.push((id, e.other));
                     }
                 }
