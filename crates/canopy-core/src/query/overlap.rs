@@ -91,8 +91,9 @@ impl Bvh {
         // On the four-wide copy (`Node4`, shared with the ray casts and the self-pair walk):
         // the four children of a node are tested against the query at once, one SSE compare
         // per axis and side, and only the overlapping lanes are followed. Leaf lanes are
-        // reported as they are met, interior lanes pushed (last lane first), so the order is
-        // fixed for a given tree, though not the order of `overlaps`.
+        // reported as they are met; the first overlapping interior lane is visited next and the
+        // others pushed (last lane first), so the order is fixed for a given tree, though not
+        // the order of `overlaps`.
         if self.nodes.is_empty() {
             return;
         }
@@ -109,7 +110,7 @@ impl Bvh {
             for a in 0..3 {
                 mask &= F4::load4(&n.b[a]).le_bits(qhi[a]) & qlo[a].le_bits(F4::load4(&n.b[3 + a]));
             }
-            // Interior lanes, pushed last lane first so that the first is visited first.
+            // The overlapping interior lanes, followed after the leaf lanes are reported.
             let mut interior = 0u32;
             while mask != 0 {
                 let lane = mask.trailing_zeros() as usize;
@@ -129,10 +130,18 @@ impl Bvh {
                     }
                 }
             }
-            while interior != 0 {
-                let lane = 31 - interior.leading_zeros() as usize;
-                interior &= !(1 << lane);
-                stack.push(n.first[lane]);
+            if interior != 0 {
+                // The first interior lane is visited next, without a trip through the stack;
+                // the others wait there, last lane first.
+                let next = n.first[interior.trailing_zeros() as usize];
+                interior &= interior - 1;
+                while interior != 0 {
+                    let lane = 31 - interior.leading_zeros() as usize;
+                    interior &= !(1 << lane);
+                    stack.push(n.first[lane]);
+                }
+                cur = next;
+                continue;
             }
             match stack.pop() {
                 Some(next) => cur = next,
