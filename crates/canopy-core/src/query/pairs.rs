@@ -64,6 +64,14 @@ impl PairMarks {
     pub fn any(&self) -> bool {
         self.any
     }
+
+    /// The marks as the four-wide walk reads them (valid for the tree they were made for).
+    pub(crate) fn lane_view(&self) -> Marked<'_> {
+        Marked {
+            lanes: &self.lanes,
+            slots: &self.slots,
+        }
+    }
 }
 
 /// Node and primitive-slot filters of a pair walk.
@@ -768,14 +776,6 @@ impl Bvh {
         .then_some(marks)
     }
 
-    /// The four-wide lane marks of `m` (made for this tree).
-    pub(crate) fn lane_view<'a>(m: &'a PairMarks) -> Marked<'a> {
-        Marked {
-            lanes: &m.lanes,
-            slots: &m.slots,
-        }
-    }
-
     /// [`Bvh::self_pairs`] restricted to pairs with at least one marked primitive.
     ///
     /// ```
@@ -794,7 +794,7 @@ impl Bvh {
             return;
         }
         match self.checked_marks(marks) {
-            Some(m) if m.any => super::pairs4::self_pairs4(self, &Self::lane_view(m), f),
+            Some(m) if m.any => super::pairs4::self_pairs4(self, &m.lane_view(), f),
             Some(_) => {}
             // All marked: the walk (and order) of the plain query before it had its own.
             None => wwalk::<true>(self, self, (0, 0), &mut f),
@@ -819,7 +819,7 @@ impl Bvh {
         }
         match self.checked_marks(marks) {
             Some(m) if m.any => {
-                super::pairs4::par_self_pairs4(self, &Self::lane_view(m), PARALLEL_TASKS)
+                super::pairs4::par_self_pairs4(self, &m.lane_view(), PARALLEL_TASKS)
             }
             Some(_) => Vec::new(),
             // All marked: the walk (and order) of the plain query before it had its own.

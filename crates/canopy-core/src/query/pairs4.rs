@@ -421,8 +421,8 @@ impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
                 (prim_box(&t.prim_bounds[s]), t.prim_indices[s])
             }
         };
-        // Whether the primitive of slot `s` (or of a one-primitive lane) is marked; only asked
-        // of a multi-primitive leaf or when the other lane is not all marked.
+        // Whether the primitive of slot `s` is marked; a one-primitive lane's mark is its
+        // primitive's.
         let marked = |single: bool, s: usize, lane_marked: bool| {
             if single {
                 lane_marked
@@ -432,12 +432,11 @@ impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
         };
         let (ra, sa) = prims(na, i);
         let (rb, sb) = prims(nb, j);
-        let (la, lb) = (mi, mj);
         for s in ra {
             let ((plo, phi), ip) = get(na, i, sa, s);
-            let ms = M::ALL || marked(sa, s, la);
+            let ms = M::ALL || marked(sa, s, mi);
             for u in rb.clone() {
-                if !ms && !marked(sb, u, lb) {
+                if !ms && !marked(sb, u, mj) {
                     continue;
                 }
                 let ((ulo, uhi), iu) = get(nb, j, sb, u);
@@ -663,7 +662,7 @@ mod tests {
                 < density
         };
         let m = t.marks(mark);
-        let view = crate::Bvh::lane_view(&m);
+        let view = m.lane_view();
         let n = b.len();
         let mut expect = Vec::new();
         for i in 0..n {
