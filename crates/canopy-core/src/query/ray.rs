@@ -198,7 +198,9 @@ impl Bvh {
         }
     }
 
-    /// The four-wide copy of this (non-empty) tree, made on first use.
+    /// The four-wide copy of this (non-empty) tree, made on first use. Inline: every box query
+    /// asks for it, and the answer is one load and one check once it is made.
+    #[inline]
     pub(crate) fn four_wide(&self) -> &Ray4 {
         self.ray4
             .get_or_init(|| Ray4::new(&self.nodes, &self.prim_indices))
