@@ -769,10 +769,16 @@ impl Bvh {
     }
 
     /// `marks` when it was made for this tree, else `None` (callers then treat all as marked).
+    /// Marks made for a tree also made its four-wide copy, so a tree without one gets `None`
+    /// rather than a copy built only for this check.
     fn checked_marks<'a>(&self, marks: &'a PairMarks) -> Option<&'a PairMarks> {
         (marks.nodes.len() == self.nodes.len()
             && marks.slots.len() == self.len()
-            && (self.nodes.is_empty() || marks.lanes.len() == self.four_wide().nodes.len()))
+            && (self.nodes.is_empty()
+                || self
+                    .ray4
+                    .get()
+                    .is_some_and(|r4| r4.nodes.len() == marks.lanes.len())))
         .then_some(marks)
     }
 
