@@ -11,8 +11,9 @@
 //! 3. Trees are refit or rebuilt (`proxy_tree.rs`).
 //! 4. Deletions: only candidate pairs (fat boxes overlapping, see `pair_set.rs`) of moved
 //!    proxies are checked; a candidate goes when the fat boxes separate or the filter now
-//!    rejects it, with `DeletePair` if it was live. With few moves, the queries of step 5
-//!    decide it: a candidate its moved proxy's queries no longer meet has ended.
+//!    rejects it, with `DeletePair` if it was live. The searches of step 5 decide it: a
+//!    candidate of a moved proxy that its queries (few moves) or the pair walks (many moves)
+//!    no longer meet has ended.
 //! 5. New candidates. With few moves, one query per moved proxy on every tree it may pair
 //!    with (members and the pending proxies' small tree); of two moved proxies the smaller id
 //!    reports. Otherwise moved proxies are marked in their tree, and one marked pair walk per
@@ -222,6 +223,8 @@ impl CanopyBroadPhase {
         }
     }
 
+    /// Puts proxy `id` into the move buffer, once per update (its `moved` flag): the dense
+    /// path's `take_unmet` relies on `moved` holding each id once.
     fn mark_moved(&mut self, id: u32) {
         self.mirror.touch(id);
         if let Some(p) = self.proxies[id as usize].as_mut() {
@@ -738,26 +741,6 @@ impl CanopyBroadPhase {
         }
     }
 
-    /// Step 4 when many moved: the candidates of moved proxies whose fat boxes are apart or
-    /// whose filter now rejects them.
-    fn ended_pairs(&self, moved: &[u32]) -> Vec<(u32, u32)> {
-        let mut gone = Vec::new();
-        for &id in moved {
-            let Some(p) = &self.proxies[id as usize] else {
-                continue;
-            };
-            for e in self.pairs.partners(id) {
-                let Some(o) = &self.proxies[e.other as usize] else {
-                    continue;
-                };
-                if !p.fat.intersects(&o.fat) || !p.filter.may_pair(&o.filter) {
-                    gone.push((id, e.other));
-                }
-            }
-        }
-        gone
-    }
-
     /// `false` when no collider of tree `m` can pair with `p`.
     fn may_query(&self, p: &Proxy, m: Mobility) -> bool {
         if m == Mobility::Fixed && p.mobility == Mobility::Fixed && self.fixed_fixed == 0 {
@@ -777,9 +760,9 @@ impl CanopyBroadPhase {
 
     /// Steps 4 and 5: the candidates of moved proxies that ended, and every new candidate pair
     /// of a moved proxy. With few moves, one query per moved proxy finds both; otherwise the
-    /// partner lists of the moved proxies are checked, and tree members that moved are marked
-    /// and found by one marked pair walk per pair of trees, and the pending proxies' trees are
-    /// walked against the member trees.
+    /// tree members that moved are marked and found by one marked pair walk per pair of trees,
+    /// and the pending proxies' trees are walked against the member trees; the candidates of
+    /// moved proxies that no walk met ended.
     fn find_changed_pairs(&mut self, moved: &[u32]) -> (Vec<IdPair>, Vec<IdPair>) {
         let members: usize = self.trees.iter().map(|t| t.members.len()).sum();
         let mut found = Vec::new();
@@ -791,11 +774,29 @@ impl CanopyBroadPhase {
             }
             return (gone, found);
         }
-        let gone = self.ended_pairs(moved);
         let marks = self.member_marks(moved);
         self.walk_members(&marks, &mut found);
         self.pending_pairs(&marks, &mut found);
-        (gone, found)
+        // The walks met every candidate of a moved proxy that goes on (fat boxes overlapping,
+        // filter passing): those are marked met on the moved side, and the moved proxies'
+        // other candidates ended. Only the pairs that are not candidates yet stay in `found`.
+        let is_moved = |id: u32| self.proxies[id as usize].as_ref().is_some_and(|p| p.moved);
+        let flags: Vec<(bool, bool)> = found
+            .iter()
+            .map(|&(a, b)| (is_moved(a), is_moved(b)))
+            .collect();
+        let mut new = Vec::with_capacity(found.len());
+        for (&(a, b), &(at_a, at_b)) in found.iter().zip(&flags) {
+            if !self.pairs.mark_met(a, b, at_a, at_b) {
+                new.push((a, b));
+            }
+        }
+        // Every marked list is read here (`moved` holds each id once: `mark_moved`).
+        let mut gone = Vec::new();
+        for &id in moved {
+            self.pairs.take_unmet(id, &mut gone);
+        }
+        (gone, new)
     }
 
     /// Marks of the moved BVH members, per tree (`None`: nothing moved there).

@@ -15,11 +15,19 @@
 //! edge in the other list), kept through every removal, so every lookup of a pair scans only
 //! the shorter of the two lists: a ground or a large static collider with thousands of
 //! partners is never scanned for one of them.
+//!
+//! When many proxies moved, the broadphase meets every candidate that goes on in its pair
+//! walks; it marks those edges *met* ([`PairSet::mark_met`], on the side of each moved
+//! partner), and a moved proxy's candidates left unmarked are the ones that ended
+//! ([`PairSet::take_unmet`], which also clears the marks). No partner is looked up to decide.
 
 /// The place of a live candidate.
 const LIVE: u32 = u32::MAX;
 /// The place held by the edge in the larger id's list of a candidate that is not live.
 const WAITING: u32 = u32::MAX - 1;
+/// The bit of [`Edge::twin`] that marks an edge met by this update's pair walks; clear
+/// between updates (see [`PairSet::mark_met`]).
+const MET: u32 = 1 << 31;
 
 /// The two proxy ids of a key, smaller first.
 #[inline]
@@ -40,7 +48,8 @@ pub(crate) struct Edge {
     /// [`LIVE`]; else, in the smaller id's list, the pair's index in the waiting list, and
     /// [`WAITING`] in the other.
     place: u32,
-    /// Index of the twin edge (the same pair) in the partner list of `other`.
+    /// Index of the twin edge (the same pair) in the partner list of `other`, and the
+    /// [`MET`] bit.
     twin: u32,
 }
 
@@ -49,6 +58,12 @@ impl Edge {
     #[inline]
     pub fn live(&self) -> bool {
         self.place == LIVE
+    }
+
+    /// The index of the twin edge in the partner list of `other`.
+    #[inline]
+    fn twin_index(&self) -> usize {
+        (self.twin & !MET) as usize
     }
 }
 
@@ -101,10 +116,10 @@ impl PairSet {
         let (lo_list, hi_list) = (self.partners(lo), self.partners(hi));
         if lo_list.len() <= hi_list.len() {
             let i = lo_list.iter().position(|e| e.other == hi)?;
-            Some((i, lo_list[i].twin as usize))
+            Some((i, lo_list[i].twin_index()))
         } else {
             let j = hi_list.iter().position(|e| e.other == lo)?;
-            Some((hi_list[j].twin as usize, j))
+            Some((hi_list[j].twin_index(), j))
         }
     }
 
@@ -120,9 +135,46 @@ impl PairSet {
     fn take_edge(&mut self, a: u32, i: usize) -> Edge {
         let e = self.adjacency[a as usize].swap_remove(i);
         if let Some(&m) = self.adjacency[a as usize].get(i) {
-            self.adjacency[m.other as usize][m.twin as usize].twin = i as u32;
+            let t = &mut self.adjacency[m.other as usize][m.twin_index()].twin;
+            *t = (*t & MET) | i as u32;
         }
         e
+    }
+
+    /// Marks candidate `a`-`b` as met this update: its edge in the list of `a` when `at_a`, in
+    /// the list of `b` when `at_b`. Returns `false` (and marks nothing) when `a`-`b` is not a
+    /// candidate. Each marked list must be read by [`PairSet::take_unmet`] before any pair is
+    /// inserted or removed.
+    pub fn mark_met(&mut self, a: u32, b: u32, at_a: bool, at_b: bool) -> bool {
+        if a.max(b) as usize >= self.adjacency.len() {
+            return false;
+        }
+        let (lo, hi) = (a.min(b), a.max(b));
+        let Some((i, j)) = self.find(lo, hi) else {
+            return false;
+        };
+        let (at_lo, at_hi) = if a < b { (at_a, at_b) } else { (at_b, at_a) };
+        if at_lo {
+            self.adjacency[lo as usize][i].twin |= MET;
+        }
+        if at_hi {
+            self.adjacency[hi as usize][j].twin |= MET;
+        }
+        true
+    }
+
+    /// Pushes `(a, other)` for every candidate of `a` whose edge in the list of `a` is not
+    /// marked met, in list order, and clears the marks of the others.
+    pub fn take_unmet(&mut self, a: u32, out: &mut Vec<(u32, u32)>) {
+        let Some(list) = self.adjacency.get_mut(a as usize) else {
+            return;
+        };
+        for e in list {
+            if e.twin & MET == 0 {
+                out.push((a, e.other));
+            }
+            e.twin &= !MET;
+        }
     }
 
     /// Adds a candidate, live when `live()` says so (asked only for a new candidate); `None`
@@ -262,6 +314,9 @@ mod tests {
         Live(u32, u32),
         Remove(u32, u32),
         RemoveAll(u32),
+        /// Mark the candidates of the proxy whose positions (in partner order) are set in the
+        /// mask as met, then take its unmet ones.
+        Met(u32, u16),
     }
 
     fn op() -> impl Strategy<Value = Op> {
@@ -270,7 +325,8 @@ mod tests {
             4 => (id.clone(), id.clone(), prop::bool::ANY).prop_map(|(a, b, l)| Op::Insert(a, b, l)),
             3 => (id.clone(), id.clone()).prop_map(|(a, b)| Op::Live(a, b)),
             2 => (id.clone(), id.clone()).prop_map(|(a, b)| Op::Remove(a, b)),
-            1 => id.prop_map(Op::RemoveAll),
+            1 => id.clone().prop_map(Op::RemoveAll),
+            2 => (id, prop::num::u16::ANY).prop_map(|(a, m)| Op::Met(a, m)),
         ]
     }
 
@@ -317,6 +373,37 @@ mod tests {
                         expected.sort();
                         prop_assert_eq!(gone, expected);
                     }
+                    Op::Met(a, mask) => {
+                        let mut others: Vec<u32> = model
+                            .keys()
+                            .filter(|&&(x, y)| x == a || y == a)
+                            .map(|&(x, y)| if x == a { y } else { x })
+                            .collect();
+                        others.sort();
+                        let mut expected = Vec::new();
+                        for (k, &o) in others.iter().enumerate() {
+                            if mask & (1 << (k % 16)) != 0 {
+                                // Both argument orders.
+                                let marked = if k % 2 == 0 {
+                                    set.mark_met(a, o, true, false)
+                                } else {
+                                    set.mark_met(o, a, false, true)
+                                };
+                                prop_assert!(marked);
+                            } else {
+                                expected.push((a, o));
+                            }
+                        }
+                        prop_assert!(!set.mark_met(a, a, true, true));
+                        let mut unmet = Vec::new();
+                        set.take_unmet(a, &mut unmet);
+                        unmet.sort();
+                        prop_assert_eq!(unmet, expected);
+                        // The marks are gone: with nothing marked, every candidate is unmet.
+                        let mut all = Vec::new();
+                        set.take_unmet(a, &mut all);
+                        prop_assert_eq!(all.len(), others.len());
+                    }
                     _ => {}
                 }
                 prop_assert_eq!(set.candidate_len(), model.len());
@@ -343,8 +430,8 @@ mod tests {
                     // Twins point at each other and agree; the smaller id's edge of a waiting
                     // pair holds its place in the waiting list.
                     for (k, e) in set.partners(id).iter().enumerate() {
-                        let twin = set.partners(e.other)[e.twin as usize];
-                        prop_assert_eq!((twin.other, twin.twin as usize), (id, k));
+                        let twin = set.partners(e.other)[e.twin_index()];
+                        prop_assert_eq!((twin.other, twin.twin_index()), (id, k));
                         prop_assert_eq!(twin.live(), e.live());
                         if id < e.other && !e.live() {
                             prop_assert_eq!(set.waiting_list()[e.place as usize], key(id, e.other));
