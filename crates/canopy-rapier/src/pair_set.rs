@@ -26,7 +26,8 @@ const LIVE: u32 = u32::MAX;
 /// The place held by the edge in the larger id's list of a candidate that is not live.
 const WAITING: u32 = u32::MAX - 1;
 /// The bit of [`Edge::twin`] that marks an edge met by this update's pair walks; clear
-/// between updates (see [`PairSet::mark_met`]).
+/// between updates (see [`PairSet::mark_met`]). Twin indices stay below it: a partner list
+/// holds at most one edge per other proxy id, far fewer than 2^31.
 const MET: u32 = 1 << 31;
 
 /// The two proxy ids of a key, smaller first.
