@@ -14,9 +14,9 @@ pub struct RebuildPolicy {
     /// Rebuild a refit tree once its SAH cost exceeds this multiple of its cost right after the
     /// last build. Default: 1.5.
     pub max_cost_growth: f64,
-    /// New colliders wait in a small unsorted list that is scanned linearly; the tree is rebuilt
-    /// once that list exceeds `max(min_pending, tree size * pending_fraction)`. Defaults: 16 and
-    /// 1/16.
+    /// New colliders wait in a pending list with a small tree of its own (rebuilt when the list
+    /// changes, refit when only boxes do); the main tree is rebuilt once that list exceeds
+    /// `max(min_pending, tree size * pending_fraction)`. Defaults: 16 and 1/16.
     pub min_pending: usize,
     /// See [`RebuildPolicy::min_pending`].
     pub pending_fraction: f64,
