@@ -780,23 +780,15 @@ impl CanopyBroadPhase {
         // The walks met every candidate of a moved proxy that goes on (fat boxes overlapping,
         // filter passing): those are marked met on the moved side, and the moved proxies'
         // other candidates ended. Only the pairs that are not candidates yet stay in `found`.
-        let is_moved = |id: u32| self.proxies[id as usize].as_ref().is_some_and(|p| p.moved);
-        let flags: Vec<(bool, bool)> = found
-            .iter()
-            .map(|&(a, b)| (is_moved(a), is_moved(b)))
-            .collect();
-        let mut new = Vec::with_capacity(found.len());
-        for (&(a, b), &(at_a, at_b)) in found.iter().zip(&flags) {
-            if !self.pairs.mark_met(a, b, at_a, at_b) {
-                new.push((a, b));
-            }
-        }
+        let (proxies, pairs) = (&self.proxies, &mut self.pairs);
+        let is_moved = |id: u32| proxies[id as usize].as_ref().is_some_and(|p| p.moved);
+        found.retain(|&(a, b)| !pairs.mark_met(a, b, is_moved(a), is_moved(b)));
         // Every marked list is read here (`moved` holds each id once: `mark_moved`).
         let mut gone = Vec::new();
         for &id in moved {
             self.pairs.take_unmet(id, &mut gone);
         }
-        (gone, new)
+        (gone, found)
     }
 
     /// Marks of the moved BVH members, per tree (`None`: nothing moved there).

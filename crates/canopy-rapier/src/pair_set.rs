@@ -147,9 +147,6 @@ impl PairSet {
     /// candidate. Each marked list must be read by [`PairSet::take_unmet`] before any pair is
     /// inserted or removed.
     pub fn mark_met(&mut self, a: u32, b: u32, at_a: bool, at_b: bool) -> bool {
-        if a.max(b) as usize >= self.adjacency.len() {
-            return false;
-        }
         let (lo, hi) = (a.min(b), a.max(b));
         let Some((i, j)) = self.find(lo, hi) else {
             return false;
