@@ -199,9 +199,22 @@ proptest! {
         a in prop::array::uniform6(coordinate()),
         b in prop::array::uniform6(coordinate()),
         reuse in prop::array::uniform6(0usize..9),
+        sorted in prop::bool::ANY,
     ) {
         let b: [f32; 6] = std::array::from_fn(|k| if reuse[k] < 6 { a[reuse[k]] } else { b[k] });
-        let make = |v: [f32; 6]| Aabb::from_arrays([v[0], v[1], v[2]], [v[3], v[4], v[5]]);
+        // Half the cases have min <= max on every axis (NaN aside), so that overlapping and
+        // nested boxes, where the answer is `true`, are common.
+        let make = |v: [f32; 6]| {
+            let (mut min, mut max) = ([v[0], v[1], v[2]], [v[3], v[4], v[5]]);
+            if sorted {
+                for i in 0..3 {
+                    if min[i] > max[i] {
+                        std::mem::swap(&mut min[i], &mut max[i]);
+                    }
+                }
+            }
+            Aabb::from_arrays(min, max)
+        };
         let (x, y) = (make(a), make(b));
         prop_assert_eq!(x.intersects_branchless(&y), x.intersects(&y));
         prop_assert_eq!(y.intersects_branchless(&x), y.intersects(&x));
