@@ -113,19 +113,16 @@ pub struct CanopyBroadPhase {
     stats: BroadPhaseStats,
     /// Number of proxies whose `active_collision_types` allow fixed-fixed contacts.
     fixed_fixed: usize,
-    /// Proxies examined this update (their exact box may have changed), in examine order.
-    touched: Vec<u32>,
-    /// Per proxy id: whether it is in `touched` (all `false` between updates).
-    is_touched: Vec<bool>,
     /// Per proxy id: the exact collision box at the last update that saw the collider. Kept
-    /// apart from the proxies so the liveness pass reads one dense array.
+    /// apart from the proxies so the liveness pass reads one dense array. A collider Rapier
+    /// does not report has not moved, so every valid proxy's entry is its current box.
     pub(crate) tights: Vec<Aabb>,
     /// Ids written by the fast path of step 2; the first `leaver_count` are proxies whose
     /// exact box left their fat box this update.
     leavers: Vec<u32>,
     leaver_count: usize,
-    /// Reused buffers: a bitmap of the modified handles' indices (all zero between updates)
-    /// and their generations.
+    /// Reused buffers: a bitmap of the modified handles' indices (all zero between updates;
+    /// step 6 reads it) and their generations.
     scratch_order: (Vec<u64>, Vec<u32>),
     /// Edits made outside a step, for the scene queries (`queries/overlay.rs`).
     pub(crate) overlay: QueryOverlay,
@@ -338,12 +335,6 @@ impl CanopyBroadPhase {
             {
                 let tight = Self::collision_aabb(params, collider, parent);
                 self.tights[id as usize] = tight;
-                // Only proxies with candidates not live yet have anything to check in step 6
-                // (a non-live candidate counts at both ends, and new ones are checked in step 5).
-                if self.pairs.waiting(id) > 0 {
-                    self.is_touched[id as usize] = true;
-                    self.touched.push(id);
-                }
                 // Whether the exact box left the fat box waits on the collider's memory: no
                 // branch on it here (a misprediction would stall the loop until that load
                 // arrives). The id is written either way and kept only when it left; those
@@ -480,7 +471,6 @@ impl CanopyBroadPhase {
         if id as usize >= self.proxies.len() {
             self.proxies.resize_with(id as usize + 1, || None);
             self.tights.resize(id as usize + 1, Aabb::EMPTY);
-            self.is_touched.resize(id as usize + 1, false);
         }
         let existing = self.proxies[id as usize].take();
         let mut p = match existing {
@@ -507,8 +497,6 @@ impl CanopyBroadPhase {
                 self.proxies[id as usize] = Some(p);
                 if valid {
                     self.mark_moved(id);
-                    self.is_touched[id as usize] = true;
-                    self.touched.push(id);
                 }
                 return;
             }
@@ -532,10 +520,6 @@ impl CanopyBroadPhase {
         }
 
         self.tights[id as usize] = tight;
-        if !self.is_touched[id as usize] {
-            self.is_touched[id as usize] = true;
-            self.touched.push(id);
-        }
         let mut moved = false;
         if p.filter != filter {
             let had_ff = p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED);
@@ -758,6 +742,60 @@ impl CanopyBroadPhase {
         ta.len() > 0 && tb.len() > 0 && ta.summary.may_pair_with_tree(&tb.summary)
     }
 
+    /// Step 6: the waiting candidates (not live yet) of the colliders Rapier reported
+    /// (`modified`, a bitmap of their indices, `count` of them) whose exact boxes now overlap.
+    /// Either every waiting candidate is checked, in the flat list's order, or each reported
+    /// proxy's, in index order: whichever reads less, by an estimate (each reported proxy's
+    /// lookup, plus its share of the waiting candidates, two ends each). Both give the same
+    /// pairs (see step 6 in `update`).
+    fn liveness_flips(&self, modified: &[u64], count: usize) -> Vec<IdPair> {
+        let waiting = self.pairs.waiting_list();
+        let mut flips = Vec::new();
+        if waiting.is_empty() {
+            return flips;
+        }
+        let tights = &self.tights;
+        let proxies = self.proxies.len().max(1);
+        let per_proxy_reads = count + 2 * waiting.len() * count.min(proxies) / proxies;
+        if waiting.len() <= per_proxy_reads {
+            for &k in waiting {
+                let (a, b) = unkey(k);
+                // Without early exits: a partial overlap along one axis is common among
+                // waiting candidates, and each early exit mispredicted (spawn_storm: ~3%).
+                if tights[a as usize].intersects_branchless(&tights[b as usize]) {
+                    flips.push((a, b));
+                }
+            }
+            return flips;
+        }
+        let reported = |id: u32| {
+            modified
+                .get(id as usize / 64)
+                .is_some_and(|w| w & (1 << (id % 64)) != 0)
+        };
+        for (w, &word) in modified.iter().enumerate() {
+            let mut word = word;
+            while word != 0 {
+                let id = w as u32 * 64 + word.trailing_zeros();
+                word &= word - 1;
+                if self.pairs.waiting(id) == 0 {
+                    continue;
+                }
+                let tight = &tights[id as usize];
+                for e in self.pairs.partners(id) {
+                    // A pair of two reported colliders is checked once, from its smaller id.
+                    if e.live() || (e.other < id && reported(e.other)) {
+                        continue;
+                    }
+                    if tight.intersects_branchless(&tights[e.other as usize]) {
+                        flips.push((id, e.other));
+                    }
+                }
+            }
+        }
+        flips
+    }
+
     /// Steps 4 and 5: the candidates of moved proxies that ended, and every new candidate pair
     /// of a moved proxy. With few moves, one query per moved proxy finds both; otherwise the
     /// tree members that moved are marked and found by one marked pair walk per pair of trees,
@@ -926,10 +964,12 @@ impl BroadPhase for CanopyBroadPhase {
         self.leaver_count = 0;
         let mut refattened = 0;
         let mut body_checks = Vec::with_capacity(BODY_CHECK_CHUNK);
-        for (w, word) in bits.iter_mut().enumerate() {
-            while *word != 0 {
+        // The bitmap stays set until step 6 has read it.
+        for (w, &word) in bits.iter().enumerate() {
+            let mut word = word;
+            while word != 0 {
                 let bit = word.trailing_zeros();
-                *word &= *word - 1;
+                word &= word - 1;
                 let index = w as u32 * 64 + bit;
                 let handle = ColliderHandle::from_raw_parts(index, generations[index as usize]);
                 if let Some(rb) = self.examine(params, colliders, bodies, handle, margins, events) {
@@ -952,7 +992,6 @@ impl BroadPhase for CanopyBroadPhase {
                 }
             }
         }
-        self.scratch_order = (bits, generations);
         self.check_body_types(params, colliders, bodies, &body_checks, margins, events);
         self.refatten_since(refattened, params, colliders, bodies, margins, events);
 
@@ -992,46 +1031,13 @@ impl BroadPhase for CanopyBroadPhase {
 
         // 6. Liveness: every collider Rapier reported re-checks its candidates that are not live
         //    yet (new candidates were checked above). Live pairs end with their candidate.
-        //    When the touched proxies hold at least half of all waiting candidates, the flat
-        //    list of waiting candidates is read front to back; otherwise each touched proxy's
-        //    partner list.
-        let touched = std::mem::take(&mut self.touched);
-        let mut flips = Vec::new();
-        let checks: usize = touched
-            .iter()
-            .map(|&id| self.pairs.waiting(id) as usize)
-            .sum();
-        if checks * 2 >= self.pairs.waiting_list().len() {
-            for &k in self.pairs.waiting_list() {
-                let (a, b) = unkey(k);
-                // Without early exits: a partial overlap along one axis is common among
-                // waiting candidates, and each early exit mispredicted (spawn_storm: ~3%).
-                if (self.is_touched[a as usize] || self.is_touched[b as usize])
-                    && self.tights[a as usize].intersects_branchless(&self.tights[b as usize])
-                {
-                    flips.push((a, b));
-                }
-            }
-        } else {
-            for &id in &touched {
-                if self.pairs.waiting(id) == 0 {
-                    continue;
-                }
-                let tight = &self.tights[id as usize];
-                for e in self.pairs.partners(id) {
-                    // A pair of two touched proxies is checked once, from its smaller id.
-                    if e.live() || (e.other < id && self.is_touched[e.other as usize]) {
-                        continue;
-                    }
-                    if tight.intersects_branchless(&self.tights[e.other as usize]) {
-                        flips.push((id, e.other));
-                    }
-                }
-            }
-        }
-        for &id in &touched {
-            self.is_touched[id as usize] = false;
-        }
+        //    A waiting candidate neither of whose colliders was reported kept both boxes, so it
+        //    still does not overlap: checking it too changes nothing. So when the reported
+        //    colliders hold most waiting candidates, the flat list of waiting candidates is
+        //    read front to back; otherwise each reported collider's partner list is.
+        let flips = self.liveness_flips(&bits, modified_colliders.len());
+        bits.fill(0);
+        self.scratch_order = (bits, generations);
         for (a, b) in flips {
             if !self.pairs.set_live(a, b, true) {
                 self.push_add(a, b, events);
@@ -1042,8 +1048,6 @@ impl BroadPhase for CanopyBroadPhase {
             .filter(|e| matches!(e, BroadPhasePairEvent::AddPair(_)))
             .count();
         let deleted = events.len() - events_before - added;
-        self.touched = touched;
-        self.touched.clear();
 
         for &id in &moved {
             if let Some(p) = self.proxies[id as usize].as_mut() {
