@@ -15,6 +15,7 @@
 //! tasks pass through a small window that prefetches their nodes a few tasks ahead.
 
 use super::ray::{Node4, Ray4, INTERIOR};
+use super::{prefetch, prefetch_node};
 use crate::build::f4::{overlap, prim_box, F4};
 use crate::bvh::{Bvh, PrimBounds};
 use rayon::prelude::*;
@@ -111,28 +112,6 @@ fn lane_box(n: &Node4, lane: usize) -> (F4, F4) {
 #[inline(always)]
 fn report(a: u32, b: u32, f: &mut impl FnMut(u32, u32)) {
     f(a.min(b), a.max(b));
-}
-
-/// A hint to start loading the cache line holding `p`; never faults.
-#[inline(always)]
-fn prefetch<T>(p: *const T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is only a hint: it never faults and never changes memory, whatever
-    // the address; SSE is part of the x86_64 baseline.
-    unsafe {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        _mm_prefetch::<_MM_HINT_T0>(p.cast());
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
-}
-
-/// A hint to start loading `Node4` `i` (both of its lines).
-#[inline(always)]
-fn prefetch_node(r4: &Ray4, i: u32) {
-    let p = r4.nodes.as_ptr().wrapping_add(i as usize).cast::<u8>();
-    prefetch(p);
-    prefetch(p.wrapping_add(64));
 }
 
 /// Number of tasks taken off the stack ahead of their turn, so that the lines they read are

@@ -6,7 +6,7 @@
 //! children as their node is reached). The caller's callback decides the exact primitive test;
 //! the stored primitive boxes cull first.
 
-use super::Stack;
+use super::{prefetch, Stack};
 use crate::build::f4::F4;
 use crate::bvh::{Bvh, Node};
 use crate::ray::Ray;
@@ -220,21 +220,6 @@ impl Bvh {
             prefetch(self.prim_bounds.as_ptr().wrapping_add(i));
         }
     }
-}
-
-/// A hint to load the cache line holding `p` into all cache levels; no effect on targets
-/// without a prefetch instruction in `core::arch` on stable Rust.
-#[inline(always)]
-fn prefetch<T>(p: *const T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is only a hint: it never faults and never changes memory, whatever
-    // the address; SSE is part of the x86_64 baseline.
-    unsafe {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        _mm_prefetch::<_MM_HINT_T0>(p.cast());
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
 }
 
 /// Size of the four-wide tree beyond which a visit starts loading all its interior children
