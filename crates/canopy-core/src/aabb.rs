@@ -4,6 +4,7 @@
 //! queries take `Aabb` at the API (nalgebra points); inside the tree, nodes keep plain
 //! `[f32; 3]` bounds (see `bvh.rs`).
 
+use crate::build::f4::{aabb_box, overlap};
 use nalgebra::{Point3, Vector3};
 
 /// An axis-aligned bounding box in 3D, `f32` coordinates, closed on every face.
@@ -19,9 +20,6 @@ pub struct Aabb {
     /// Largest corner.
     pub max: Point3<f32>,
 }
-
-// Six `f32` in a row, which the SSE box tests load (`Aabb::lanes`).
-const _: () = assert!(std::mem::size_of::<Aabb>() == 24 && std::mem::align_of::<Aabb>() == 4);
 
 impl Aabb {
     /// The empty box: `min = +inf`, `max = -inf`. Merging anything into it gives that thing.
@@ -94,51 +92,13 @@ impl Aabb {
 
     /// [`Aabb::intersects`] without early exits: all six comparisons, combined bitwise, so
     /// that no branch waits on the boxes or mispredicts on a partial overlap (for loops over
-    /// many box pairs whose answers are hard to predict). On x86-64, two four-lane SSE
-    /// comparisons (about a third of the instructions of six scalar ones).
+    /// many box pairs whose answers are hard to predict). Two four-lane comparisons (SSE on
+    /// x86-64), as the tree walks test a primitive's box.
     #[inline]
     pub fn intersects_branchless(&self, other: &Aabb) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_cmple_ps, _mm_movemask_ps};
-            let (a_min, a_max) = self.lanes();
-            let (b_min, b_max) = other.lanes();
-            // SAFETY: SSE is part of the x86-64 baseline; the intrinsics only compare values.
-            let (lo, hi) = unsafe {
-                (
-                    _mm_movemask_ps(_mm_cmple_ps(a_min, b_max)),
-                    _mm_movemask_ps(_mm_cmple_ps(b_min, a_max)),
-                )
-            };
-            lo & hi & 0b111 == 0b111
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            (self.min.x <= other.max.x)
-                & (other.min.x <= self.max.x)
-                & (self.min.y <= other.max.y)
-                & (other.min.y <= self.max.y)
-                & (self.min.z <= other.max.z)
-                & (other.min.z <= self.max.z)
-        }
-    }
-
-    /// The box as two SSE registers: `(min.x, min.y, min.z, max.x)` and
-    /// `(max.x, max.y, max.z, max.z)`; callers look at the first three lanes only.
-    #[cfg(target_arch = "x86_64")]
-    #[inline(always)]
-    fn lanes(&self) -> (std::arch::x86_64::__m128, std::arch::x86_64::__m128) {
-        use std::arch::x86_64::{_mm_loadu_ps, _mm_shuffle_ps};
-        let p = (self as *const Aabb).cast::<f32>();
-        // SAFETY: `Aabb` is `repr(C)`, six `f32` in a row (`Point3<f32>` is three `f32`): the
-        // loads read floats 0..4 and 2..6, all inside the box. SSE is part of the x86-64
-        // baseline.
-        unsafe {
-            let lo = _mm_loadu_ps(p);
-            let hi = _mm_loadu_ps(p.add(2));
-            // (min.z, max.x, max.y, max.z) -> (max.x, max.y, max.z, max.z)
-            (lo, _mm_shuffle_ps::<0b11_11_10_01>(hi, hi))
-        }
+        let (a_lo, a_hi) = aabb_box(self);
+        let (b_lo, b_hi) = aabb_box(other);
+        overlap(a_lo, a_hi, b_lo, b_hi)
     }
 
     /// `true` when `p` lies inside the closed box.
