@@ -14,8 +14,8 @@
 //! the number of steps printed for ms per step.
 
 use canopy::rapier::CanopyBroadPhase;
-use canopy::scenes::harness::{replay, replay_timed, AabbFloor, RecordedUpdate, Recorder};
-use canopy::scenes::{scene, standard_steps, Size, World, SCENE_NAMES};
+use canopy::scenes::harness::{record, replay, replay_timed, AabbFloor, RecordedUpdate};
+use canopy::scenes::{scene, standard_steps, Size, SCENE_NAMES};
 use criterion::{criterion_group, criterion_main, Criterion};
 use rapier3d::geometry::{BroadPhase, BroadPhaseBvh};
 use std::time::Duration;
@@ -30,13 +30,6 @@ fn recorded_steps(name: &str) -> usize {
         "many_kinematics" => 40,
         _ => standard_steps(name, Size::Full),
     }
-}
-
-fn record(name: &str) -> Vec<RecordedUpdate> {
-    let s = scene(name, Size::Full).expect("known scene");
-    let mut world = World::new(s, Recorder::new(BroadPhaseBvh::new()));
-    world.step_n(recorded_steps(name));
-    world.broad_phase.updates
 }
 
 fn primed<B: BroadPhase>(mut bp: B, first: &RecordedUpdate) -> B {
@@ -60,7 +53,10 @@ fn bench_scenes(c: &mut Criterion) {
                 continue;
             }
         }
-        let updates = record(name);
+        let updates = record(
+            scene(name, Size::Full).expect("known scene"),
+            recorded_steps(name),
+        );
         let (first, rest) = updates.split_first().expect("at least one update");
         println!(
             "broadphase/{name}: {} timed steps per iteration",

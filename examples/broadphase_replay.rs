@@ -15,8 +15,8 @@
 //! differ by 10 to 20%; A against an identical B mostly agrees within 2 to 4% (once 8% apart).
 
 use canopy::rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig};
-use canopy::scenes::harness::{replay, AabbFloor, RecordedUpdate, Recorder};
-use canopy::scenes::{scene, Size, World};
+use canopy::scenes::harness::{record, replay, AabbFloor, RecordedUpdate};
+use canopy::scenes::{scene, Size};
 use rapier3d::geometry::{BroadPhase, BroadPhaseBvh};
 use std::time::Instant;
 
@@ -34,9 +34,7 @@ fn main() {
         eprintln!("unknown scene {name}");
         std::process::exit(2);
     };
-    let mut world = World::new(s, Recorder::new(BroadPhaseBvh::new()));
-    world.step_n(steps);
-    let updates = world.broad_phase.updates;
+    let updates = record(s, steps);
     let (first, rest) = updates.split_first().expect("one update at least");
     let mut bp: Box<dyn BroadPhase> = match which {
         "rapier" => Box::new(BroadPhaseBvh::new()),

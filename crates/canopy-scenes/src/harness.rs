@@ -352,6 +352,20 @@ pub fn replay_timed(
     total
 }
 
+/// Steps `scene` for `steps` steps with Rapier's own broadphase and returns the inputs of every
+/// broadphase update it made (two per step), for replays into other broadphases.
+///
+/// ```
+/// use canopy_scenes::{harness, scene, Size};
+/// let updates = harness::record(scene("boxes", Size::Small).expect("known scene"), 3);
+/// assert_eq!(updates.len(), 6);
+/// ```
+pub fn record(scene: crate::Scene, steps: usize) -> Vec<RecordedUpdate> {
+    let mut world = crate::World::new(scene, Recorder::new(BroadPhaseBvh::new()));
+    world.step_n(steps);
+    world.broad_phase.updates
+}
+
 /// Replays recorded updates into `broad_phase`; returns the number of events it produced.
 pub fn replay(broad_phase: &mut dyn BroadPhase, updates: &[RecordedUpdate]) -> usize {
     let mut events = Vec::new();
