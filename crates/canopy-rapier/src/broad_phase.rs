@@ -67,6 +67,30 @@ fn prefetch_tail(rb: &RigidBody) {
 /// Two proxy ids.
 type IdPair = (u32, u32);
 
+/// Loops over moved proxies or pairs by id, whose records and partner lists are scattered over
+/// the arrays (a cache miss each), ask for them this many entries ahead: a proxy's record and
+/// the head of its partner list; the list itself, whose address is in the head, half as far
+/// ahead. (Sparse updates of `spawn_storm`: 1.09x faster, in-process A/B; 8 instead of 4, no
+/// better. Loops over nearly every proxy, in index order, need none: the hardware streams
+/// them.)
+const PREFETCH_AHEAD: usize = 4;
+
+/// Starts loading the cache lines holding the 64 bytes from `p` (one or two lines: a proxy
+/// record straddles two). Only a hint: a prefetch never faults and never changes memory,
+/// whatever the address.
+#[inline(always)]
+pub(crate) fn prefetch<T>(p: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: see above; SSE is part of the x86-64 baseline.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>(p.cast());
+        _mm_prefetch::<_MM_HINT_T0>(p.cast::<i8>().wrapping_add(63));
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
 /// With fewer moved proxies than one tree member in this many, new pairs are found by one
 /// query per moved proxy instead of marked pair walks.
 const SPARSE_MOVES: usize = 8;
@@ -725,6 +749,20 @@ impl CanopyBroadPhase {
         }
     }
 
+    /// Asks for the partner lists of both ends of `pairs[k + PREFETCH_AHEAD]` (their heads) and
+    /// of `pairs[k + PREFETCH_AHEAD / 2]` (the lists), before the pair-set edits reach them.
+    #[inline]
+    fn prefetch_pair_lists(&self, pairs: &[IdPair], k: usize) {
+        if let Some(&(a, b)) = pairs.get(k + PREFETCH_AHEAD) {
+            self.pairs.prefetch_list_head(a);
+            self.pairs.prefetch_list_head(b);
+        }
+        if let Some(&(a, b)) = pairs.get(k + PREFETCH_AHEAD / 2) {
+            self.pairs.prefetch_list(a);
+            self.pairs.prefetch_list(b);
+        }
+    }
+
     /// `false` when no collider of tree `m` can pair with `p`.
     fn may_query(&self, p: &Proxy, m: Mobility) -> bool {
         if m == Mobility::Fixed && p.mobility == Mobility::Fixed && self.fixed_fixed == 0 {
@@ -807,7 +845,16 @@ impl CanopyBroadPhase {
         if moved.len() * SPARSE_MOVES < members {
             // Few moved: one query each beats any pass over whole trees.
             let (mut gone, mut seen) = (Vec::new(), Vec::new());
-            for &id in moved {
+            for (k, &id) in moved.iter().enumerate() {
+                // Records and partner lists a few moved proxies ahead (`PREFETCH_AHEAD`): the
+                // query and the check of known partners then do not wait for them.
+                if let Some(&ahead) = moved.get(k + PREFETCH_AHEAD) {
+                    prefetch(self.proxies.as_ptr().wrapping_add(ahead as usize));
+                    self.pairs.prefetch_list_head(ahead);
+                }
+                if let Some(&near) = moved.get(k + PREFETCH_AHEAD / 2) {
+                    self.pairs.prefetch_list(near);
+                }
                 self.moved_pairs(id, &mut seen, &mut gone, &mut found);
             }
             return (gone, found);
@@ -1016,12 +1063,20 @@ impl BroadPhase for CanopyBroadPhase {
         //    candidates that end are all dropped before any new one is added.
         let moved = std::mem::take(&mut self.moved);
         let (gone, found) = self.find_changed_pairs(&moved);
-        for (a, b) in gone {
+        // Both ends' partner lists (and, for new pairs, exact boxes) are asked for a few pairs
+        // ahead: the pairs' proxies are scattered over the arrays.
+        for (k, &(a, b)) in gone.iter().enumerate() {
+            self.prefetch_pair_lists(&gone, k);
             if self.pairs.remove(a, b) == Some(true) {
                 self.push_delete(a, b, events);
             }
         }
-        for (a, b) in found {
+        for (k, &(a, b)) in found.iter().enumerate() {
+            self.prefetch_pair_lists(&found, k);
+            if let Some(&(x, y)) = found.get(k + PREFETCH_AHEAD) {
+                prefetch(self.tights.as_ptr().wrapping_add(x as usize));
+                prefetch(self.tights.as_ptr().wrapping_add(y as usize));
+            }
             let tights = &self.tights;
             let overlap = || tights[a as usize].intersects(&tights[b as usize]);
             if self.pairs.insert(a, b, overlap) == Some(true) {
@@ -1049,7 +1104,10 @@ impl BroadPhase for CanopyBroadPhase {
             .count();
         let deleted = events.len() - events_before - added;
 
-        for &id in &moved {
+        for (k, &id) in moved.iter().enumerate() {
+            if let Some(&ahead) = moved.get(k + PREFETCH_AHEAD) {
+                prefetch(self.proxies.as_ptr().wrapping_add(ahead as usize));
+            }
             if let Some(p) = self.proxies[id as usize].as_mut() {
                 p.moved = false;
                 p.box_only = false;

@@ -272,6 +272,19 @@ impl PairSet {
         Some(live)
     }
 
+    /// Starts loading the head of `a`'s partner list (where the list is), without waiting.
+    #[inline]
+    pub fn prefetch_list_head(&self, a: u32) {
+        crate::broad_phase::prefetch(self.adjacency.as_ptr().wrapping_add(a as usize));
+    }
+
+    /// Starts loading the first edges of `a`'s partner list (reads its head, which
+    /// `prefetch_list_head` should have asked for earlier).
+    #[inline]
+    pub fn prefetch_list(&self, a: u32) {
+        crate::broad_phase::prefetch(self.partners(a).as_ptr());
+    }
+
     /// Candidate partners of `a`.
     pub fn partners(&self, a: u32) -> &[Edge] {
         self.adjacency
