@@ -70,9 +70,8 @@ type IdPair = (u32, u32);
 /// Loops over moved proxies or pairs by id, whose records and partner lists are scattered over
 /// the arrays (a cache miss each), ask for them this many entries ahead: a proxy's record and
 /// the head of its partner list; the list itself, whose address is in the head, half as far
-/// ahead. (Sparse updates of `spawn_storm`: 1.09x faster, in-process A/B; 8 instead of 4, no
-/// better. Loops over nearly every proxy, in index order, need none: the hardware streams
-/// them.)
+/// ahead. (`spawn_storm` replay: 1.09x faster, `tools/ab`; 8 instead of 4, no better. Loops
+/// over nearly every proxy, in index order, need none: the hardware streams them.)
 const PREFETCH_AHEAD: usize = 4;
 
 /// Starts loading the cache lines holding the 64 bytes from `p` (one or two lines: a proxy
