@@ -74,6 +74,9 @@ fn prefetch_tail(rb: &RigidBody) {
 /// look ahead: doing it always cost `balls` about 10%.
 const SHAPE_AHEAD: usize = 8;
 
+/// Updates between two checks of whether shapes are scattered (64 cache misses each).
+const SHAPE_CHECK_INTERVAL: u32 = 8;
+
 /// The address of the data of `collider`'s shape, for `shape_hints`.
 #[inline(always)]
 fn shape_address(collider: &Collider) -> usize {
@@ -195,6 +198,9 @@ pub struct CanopyBroadPhase {
     shape_hints: Vec<usize>,
     /// Reused buffer: the shape hints of this update's modified colliders, in handle order.
     shape_queue: Vec<usize>,
+    /// The last answer of `shapes_scattered`, and the updates since the first check.
+    shapes_scattered: bool,
+    shape_checks: u32,
     /// Ids written by the fast path of step 2; the first `leaver_count` are proxies whose
     /// exact box left their fat box this update.
     leavers: Vec<u32>,
@@ -1094,7 +1100,11 @@ impl BroadPhase for CanopyBroadPhase {
         // modified colliders' shape hints, in the loop's order).
         let mut shape_queue = std::mem::take(&mut self.shape_queue);
         shape_queue.clear();
-        if self.shapes_scattered() {
+        if self.shape_checks % SHAPE_CHECK_INTERVAL == 0 {
+            self.shapes_scattered = self.shapes_scattered();
+        }
+        self.shape_checks = self.shape_checks.wrapping_add(1);
+        if self.shapes_scattered {
             let hints = &self.shape_hints;
             shape_queue
                 .extend(SetBits::new(&bits).map(|i| hints.get(i as usize).copied().unwrap_or(0)));
