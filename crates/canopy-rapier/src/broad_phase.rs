@@ -1223,3 +1223,59 @@ impl BroadPhase for CanopyBroadPhase {
         self.moved.clear();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use canopy_scenes::harness::record;
+    use canopy_scenes::{spawn_storm, Size};
+    use proptest::prelude::*;
+
+    proptest! {
+        #[test]
+        fn set_bits_yields_every_set_bit_in_order(words in prop::collection::vec(any::<u64>(), 0..6)) {
+            let naive: Vec<u32> = (0..words.len() as u32 * 64)
+                .filter(|&i| words[i as usize / 64] & (1 << (i % 64)) != 0)
+                .collect();
+            prop_assert_eq!(SetBits::new(&words).collect::<Vec<_>>(), naive);
+        }
+    }
+
+    fn plain(events: &[BroadPhasePairEvent]) -> Vec<(bool, ColliderHandle, ColliderHandle)> {
+        events
+            .iter()
+            .map(|e| match e {
+                BroadPhasePairEvent::AddPair(p) => (true, p.collider1, p.collider2),
+                BroadPhasePairEvent::DeletePair(p) => (false, p.collider1, p.collider2),
+            })
+            .collect()
+    }
+
+    /// The shape look-ahead only ever prefetches: with every hint replaced by a bogus address
+    /// (scattered, so the look-ahead runs), a churning scene gives the same events, update by
+    /// update, as with true hints, and nothing faults.
+    #[test]
+    fn shape_hints_are_only_hints() {
+        let updates = record(spawn_storm(Size::Small), 60);
+        let (mut honest, mut bogus) = (CanopyBroadPhase::new(), CanopyBroadPhase::new());
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        let (mut scattered_updates, mut events) = (0, 0);
+        for (k, u) in updates.iter().enumerate() {
+            if k > 0 {
+                for (i, h) in bogus.shape_hints.iter_mut().enumerate() {
+                    *h = 0x1000 + i * 0x1_0000;
+                }
+                // Checked at the next update whose count is a multiple of the interval.
+                assert!(bogus.shapes_scattered() || bogus.shape_hints.len() < 2);
+                scattered_updates += (bogus.shape_checks % SHAPE_CHECK_INTERVAL == 0) as usize;
+            }
+            a.clear();
+            b.clear();
+            u.apply(&mut honest, &mut a);
+            u.apply(&mut bogus, &mut b);
+            assert_eq!(plain(&a), plain(&b), "update {k}");
+            events += a.len();
+        }
+        assert!(scattered_updates > 0 && events > 0);
+    }
+}
