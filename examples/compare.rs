@@ -91,6 +91,8 @@ struct Row {
     checked_updates: usize,
     needed_pairs: usize,
     missing: usize,
+    /// Canopy's time per phase (feature `phase-times`; empty without it).
+    phases: String,
 }
 
 fn run_scene(name: &str, size: Size, steps: usize, verify_every: usize) -> Row {
@@ -125,6 +127,11 @@ fn run_scene(name: &str, size: Size, steps: usize, verify_every: usize) -> Row {
             rapier_step,
             canopy_step,
         ));
+        #[cfg(feature = "phase-times")]
+        if per_step.len() == 1 {
+            // The first step is left out of the phases too.
+            canopy.broad_phase.inner.take_phase_times();
+        }
     }
     // The first step inserts every collider: reported on its own, the mean is over the rest.
     let first = per_step[0];
@@ -132,6 +139,10 @@ fn run_scene(name: &str, size: Size, steps: usize, verify_every: usize) -> Row {
     let mean = |f: fn(&(f64, f64, f64, f64)) -> f64| {
         rest.iter().map(f).sum::<f64>() * 1000.0 / rest.len() as f64
     };
+    #[cfg(feature = "phase-times")]
+    let phases = phase_line(&canopy.broad_phase.inner.take_phase_times(), rest.len());
+    #[cfg(not(feature = "phase-times"))]
+    let phases = String::new();
     let cm = &canopy.broad_phase.meter;
     Row {
         name: name.to_string(),
@@ -148,7 +159,26 @@ fn run_scene(name: &str, size: Size, steps: usize, verify_every: usize) -> Row {
         checked_updates: cm.verified_updates,
         needed_pairs: cm.needed_pairs,
         missing: cm.missing_pairs,
+        phases,
     }
+}
+
+/// Canopy's phases, ms per step over `steps` steps (feature `phase-times`).
+#[cfg(feature = "phase-times")]
+fn phase_line(t: &canopy::rapier::PhaseTimes, steps: usize) -> String {
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1000.0 / steps.max(1) as f64;
+    format!(
+        "removals {:.3}, examine {:.3}, trees {:.3}, search {:.3}, pair edits {:.3}, liveness \
+         {:.3}, finish {:.3} (ms per step); moved per step {:.0}",
+        ms(t.removals),
+        ms(t.examine),
+        ms(t.trees),
+        ms(t.search),
+        ms(t.pair_edits),
+        ms(t.liveness),
+        ms(t.finish),
+        t.moved as f64 / steps.max(1) as f64
+    )
 }
 
 /// The ratio column: Rapier's broadphase time over canopy's, or "idle" when both took under a
@@ -196,6 +226,9 @@ fn print_table(rows: &[Row], threads: usize) {
         rows.iter().map(|r| r.checked_updates).sum::<usize>(),
         rows.iter().map(|r| r.needed_pairs).sum::<usize>(),
     );
+    for r in rows.iter().filter(|r| !r.phases.is_empty()) {
+        println!("canopy phases, {}: {}", r.name, r.phases);
+    }
 }
 
 fn out_dir() -> PathBuf {

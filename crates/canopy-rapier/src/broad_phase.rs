@@ -119,6 +119,15 @@ impl Iterator for SetBits<'_> {
 /// Two proxy ids.
 type IdPair = (u32, u32);
 
+/// With the `phase-times` feature, adds the time since the last lap to phase `$field` of
+/// `$self.phase_times`; without it, nothing.
+macro_rules! lap {
+    ($self:ident, $clock:ident, $field:ident) => {
+        #[cfg(feature = "phase-times")]
+        $clock.lap(&mut $self.phase_times.$field);
+    };
+}
+
 /// Loops over moved proxies or pairs by id, whose records and partner lists are scattered over
 /// the arrays (a cache miss each), ask for them this many entries ahead: a proxy's record and
 /// the head of its partner list; the list itself, whose address is in the head, half as far
@@ -212,6 +221,9 @@ pub struct CanopyBroadPhase {
     pub(crate) overlay: QueryOverlay,
     /// The parry BVH behind `as_query_pipeline` (`queries/pipeline.rs`).
     pub(crate) mirror: QueryMirror,
+    /// Time per step of `update`, summed (`phase_times.rs`).
+    #[cfg(feature = "phase-times")]
+    phase_times: crate::phase_times::PhaseTimes,
 }
 
 impl CanopyBroadPhase {
@@ -242,6 +254,13 @@ impl CanopyBroadPhase {
         s.rebuilds = self.trees.iter().map(|t| t.rebuilds).sum();
         s.refits = self.trees.iter().map(|t| t.refits).sum();
         s
+    }
+
+    /// The time each step of `update` took, summed over the updates since the last call, and
+    /// resets it (feature `phase-times`).
+    #[cfg(feature = "phase-times")]
+    pub fn take_phase_times(&mut self) -> crate::PhaseTimes {
+        std::mem::take(&mut self.phase_times)
     }
 
     /// `true` when the pair of colliders is live (reported by `AddPair` and not deleted since).
@@ -1063,6 +1082,8 @@ impl BroadPhase for CanopyBroadPhase {
             self.stats.deleted = 0;
             return;
         }
+        #[cfg(feature = "phase-times")]
+        let mut clock = crate::phase_times::Clock::start();
         // 1. Removals first.
         for &handle in removed_colliders {
             if self.proxy(handle).is_some() {
@@ -1070,6 +1091,7 @@ impl BroadPhase for CanopyBroadPhase {
             }
         }
 
+        lap!(self, clock, removals);
         // 2. Re-examine every modified collider.
         let margins = (
             self.config.margin * params.length_unit,
@@ -1145,6 +1167,7 @@ impl BroadPhase for CanopyBroadPhase {
         self.refatten_since(refattened, params, colliders, bodies, margins, events);
         self.shape_queue = shape_queue;
 
+        lap!(self, clock, examine);
         // 3. Trees.
         let policy = self.config.rebuild;
         for m in Mobility::ALL {
@@ -1164,8 +1187,10 @@ impl BroadPhase for CanopyBroadPhase {
         // 4. Candidates of moved proxies that ended (fat boxes apart, or the filter now rejects
         //    them), and 5. new candidates, live at once when their exact boxes overlap. The
         //    candidates that end are all dropped before any new one is added.
+        lap!(self, clock, trees);
         let moved = std::mem::take(&mut self.moved);
         let (gone, found) = self.find_changed_pairs(&moved);
+        lap!(self, clock, search);
         // Both ends' partner lists (and, for new pairs, exact boxes) are asked for a few pairs
         // ahead: the pairs' proxies are scattered over the arrays.
         for (k, &(a, b)) in gone.iter().enumerate() {
@@ -1187,6 +1212,7 @@ impl BroadPhase for CanopyBroadPhase {
             }
         }
 
+        lap!(self, clock, pair_edits);
         // 6. Liveness: every collider Rapier reported re-checks its candidates that are not live
         //    yet (new candidates were checked above). Live pairs end with their candidate.
         //    A waiting candidate neither of whose colliders was reported kept both boxes, so it
@@ -1201,6 +1227,7 @@ impl BroadPhase for CanopyBroadPhase {
                 self.push_add(a, b, events);
             }
         }
+        lap!(self, clock, liveness);
         let added = events[events_before..]
             .iter()
             .filter(|e| matches!(e, BroadPhasePairEvent::AddPair(_)))
@@ -1221,6 +1248,12 @@ impl BroadPhase for CanopyBroadPhase {
         self.stats.added = added;
         self.moved = moved;
         self.moved.clear();
+        lap!(self, clock, finish);
+        #[cfg(feature = "phase-times")]
+        {
+            self.phase_times.updates += 1;
+            self.phase_times.moved += self.stats.moved as u64;
+        }
     }
 }
 
@@ -1239,6 +1272,27 @@ mod tests {
                 .collect();
             prop_assert_eq!(SetBits::new(&words).collect::<Vec<_>>(), naive);
         }
+    }
+
+    /// Every non-empty update is counted, with its moved proxies, and taking the times resets
+    /// them.
+    #[cfg(feature = "phase-times")]
+    #[test]
+    fn phase_times_count_every_update() {
+        let updates = record(spawn_storm(Size::Small), 20);
+        let mut bp = CanopyBroadPhase::new();
+        let (mut counted, mut moved) = (0, 0);
+        for u in &updates {
+            u.apply(&mut bp, &mut Vec::new());
+            if !u.modified.is_empty() || !u.removed.is_empty() {
+                counted += 1;
+                moved += bp.stats().moved as u64;
+            }
+        }
+        let t = bp.take_phase_times();
+        assert_eq!((t.updates, t.moved), (counted, moved));
+        assert!(counted > 0 && t.total() > std::time::Duration::ZERO);
+        assert_eq!(bp.take_phase_times(), crate::PhaseTimes::default());
     }
 
     fn plain(events: &[BroadPhasePairEvent]) -> Vec<(bool, ColliderHandle, ColliderHandle)> {

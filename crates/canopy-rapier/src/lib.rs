@@ -16,6 +16,8 @@ mod broad_phase;
 mod config;
 mod filter;
 mod pair_set;
+#[cfg(feature = "phase-times")]
+mod phase_times;
 mod proxy;
 mod proxy_tree;
 mod queries;
@@ -24,5 +26,7 @@ mod stats;
 pub use broad_phase::CanopyBroadPhase;
 pub use config::{CanopyBroadPhaseConfig, RebuildPolicy};
 pub use filter::Mobility;
+#[cfg(feature = "phase-times")]
+pub use phase_times::PhaseTimes;
 pub use queries::SceneQueries;
 pub use stats::BroadPhaseStats;
