@@ -1179,10 +1179,10 @@ impl BroadPhase for CanopyBroadPhase {
             );
         }
 
+        lap!(self, clock, trees);
         // 4. Candidates of moved proxies that ended (fat boxes apart, or the filter now rejects
         //    them), and 5. new candidates, live at once when their exact boxes overlap. The
         //    candidates that end are all dropped before any new one is added.
-        lap!(self, clock, trees);
         let moved = std::mem::take(&mut self.moved);
         let (gone, found) = self.find_changed_pairs(&moved);
         lap!(self, clock, search);
