@@ -64,7 +64,7 @@ fn prefetch_tail(rb: &RigidBody) {
     let _ = rb;
 }
 
-/// Where the colliders' shapes are scattered over the heap (`shapes_scattered`), the examine
+/// Where the colliders' shapes are scattered over the heap (`shapes_look_scattered`), the examine
 /// loop asks for the shape of the collider this many modified colliders ahead, from the
 /// address its last full examination saw (`shape_hints`). Each shape is an allocation of its
 /// own, read by the box computation: in `compare`, where the rest of the physics step runs
@@ -207,7 +207,7 @@ pub struct CanopyBroadPhase {
     shape_hints: Vec<usize>,
     /// Reused buffer: the shape hints of this update's modified colliders, in handle order.
     shape_queue: Vec<usize>,
-    /// The last answer of `shapes_scattered`, and the updates since the first check.
+    /// The last answer of `shapes_look_scattered`, and the updates since the first check.
     shapes_scattered: bool,
     shape_checks: u32,
     /// Ids written by the fast path of step 2; the first `leaver_count` are proxies whose
@@ -304,7 +304,7 @@ impl CanopyBroadPhase {
     /// quarter of 64 pairs of neighbouring proxy ids, spread over the ids, have shapes more than
     /// 512 bytes apart. Shapes allocated one after the other when the world was built are
     /// neighbours; those of colliders added later to reused slots are not (`spawn_storm`).
-    fn shapes_scattered(&self) -> bool {
+    fn shapes_look_scattered(&self) -> bool {
         const SAMPLES: usize = 64;
         let hints = &self.shape_hints;
         if hints.len() < 2 {
@@ -1118,7 +1118,7 @@ impl BroadPhase for CanopyBroadPhase {
         let mut shape_queue = std::mem::take(&mut self.shape_queue);
         shape_queue.clear();
         if self.shape_checks % SHAPE_CHECK_INTERVAL == 0 {
-            self.shapes_scattered = self.shapes_scattered();
+            self.shapes_scattered = self.shapes_look_scattered();
         }
         self.shape_checks = self.shape_checks.wrapping_add(1);
         if self.shapes_scattered {
@@ -1315,7 +1315,7 @@ mod tests {
                     *h = 0x1000 + i * 0x1_0000;
                 }
                 // Checked at the next update whose count is a multiple of the interval.
-                assert!(bogus.shapes_scattered() || bogus.shape_hints.len() < 2);
+                assert!(bogus.shapes_look_scattered() || bogus.shape_hints.len() < 2);
                 scattered_updates += (bogus.shape_checks % SHAPE_CHECK_INTERVAL == 0) as usize;
             }
             a.clear();
