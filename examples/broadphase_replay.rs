@@ -3,7 +3,7 @@
 //! Run it under `valgrind --tool=callgrind --toggle-collect='*harness*replay*'` for stable
 //! instruction counts of the replay alone.
 //!
-//! `cargo run --release --example broadphase_replay -- SCENE rapier|canopy|ab [STEPS] [small|full]`
+//! `cargo run --release --example broadphase_replay -- SCENE rapier|canopy|ab|split [STEPS] [small|full]`
 //! (canopy's margin and velocity stretch can be overridden with `CANOPY_MARGIN` and
 //! `CANOPY_VELOCITY_STEPS`, `CANOPY_PENDING_FRACTION`, `CANOPY_DEAD_FRACTION`,
 //! `CANOPY_COST_GROWTH`, and `CANOPY_MOVING_SAH` to build moving trees with binned SAH).
@@ -13,6 +13,14 @@
 //! fresh copy of the sets (as the criterion bench does), A and B swapping turns every step so
 //! that neither always runs second. On this noisy 2-core VM two runs of separate processes
 //! differ by 10 to 20%; A against an identical B mostly agrees within 2 to 4% (once 8% apart).
+//!
+//! `split` times Rapier's `BroadPhaseBvh` and canopy (with the overrides above) side by side,
+//! update by update on fresh copies of the sets, taking turns, five times over; it takes each
+//! update's median time and sums them by kind of canopy update: none moved, few moved (one
+//! query per moved proxy), many moved (at least one proxy in eight: marked pair walks), and
+//! those with a tree rebuild. It shows where canopy's time goes against Rapier's, which the
+//! totals of `ab` and of the criterion bench hide (`spawn_storm`: the updates where the first
+//! layers fall together cost canopy more than Rapier).
 
 use canopy::rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig};
 use canopy::scenes::harness::{record, replay, AabbFloor, RecordedUpdate};
@@ -63,6 +71,14 @@ fn main() {
             Box::new(CanopyBroadPhase::with_config(config))
         }
     };
+    if which == "split" {
+        let config = bp
+            .as_any()
+            .downcast_ref::<CanopyBroadPhase>()
+            .map_or_else(CanopyBroadPhaseConfig::default, |c| *c.config());
+        split(name, config, first, rest);
+        return;
+    }
     if which == "ab" {
         let config = match bp.as_any().downcast_ref::<CanopyBroadPhase>() {
             Some(c) => *c.config(),
@@ -129,4 +145,95 @@ fn compare_ab(
         }
     }
     secs
+}
+
+/// The `split` mode: see the module comment.
+fn split(
+    name: &str,
+    config: CanopyBroadPhaseConfig,
+    first: &RecordedUpdate,
+    rest: &[RecordedUpdate],
+) {
+    const REPS: usize = 5;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool");
+    // Per repetition and update: Rapier's seconds, canopy's seconds, canopy's kind of update.
+    let runs: Vec<Vec<(f64, f64, usize)>> = pool.install(|| {
+        (0..REPS)
+            .map(|_| {
+                let mut rapier = BroadPhaseBvh::new();
+                let mut canopy = CanopyBroadPhase::with_config(config);
+                let mut events = Vec::new();
+                first.apply(&mut rapier, &mut events);
+                first.apply(&mut canopy, &mut events);
+                rest.iter()
+                    .enumerate()
+                    .map(|(i, u)| {
+                        let rebuilds = canopy.stats().rebuilds;
+                        let mut time = |bp: &mut dyn BroadPhase| {
+                            events.clear();
+                            u.apply_timed_on_copies(bp, &mut events).as_secs_f64()
+                        };
+                        let (r, c) = if (i / 2) % 2 == 0 {
+                            let r = time(&mut rapier);
+                            (r, time(&mut canopy))
+                        } else {
+                            let c = time(&mut canopy);
+                            (time(&mut rapier), c)
+                        };
+                        let s = canopy.stats();
+                        let proxies: usize = s.proxies.iter().sum();
+                        let kind = if s.rebuilds > rebuilds {
+                            3
+                        } else if s.moved == 0 {
+                            0
+                        } else if s.moved * 8 >= proxies {
+                            2
+                        } else {
+                            1
+                        };
+                        (r, c, kind)
+                    })
+                    .collect()
+            })
+            .collect()
+    });
+    const KINDS: [&str; 4] = ["none moved", "few moved", "many moved", "tree rebuilt"];
+    let mut sums = [(0usize, 0.0f64, 0.0f64); 4];
+    for i in 0..rest.len() {
+        let median = |k: fn(&(f64, f64, usize)) -> f64| {
+            let mut v: Vec<f64> = runs.iter().map(|r| k(&r[i])).collect();
+            v.sort_by(f64::total_cmp);
+            v[REPS / 2]
+        };
+        let (r, c) = (median(|x| x.0), median(|x| x.1));
+        // The kind is the same in every repetition (the updates are deterministic).
+        let s = &mut sums[runs[0][i].2];
+        s.0 += 1;
+        s.1 += r;
+        s.2 += c;
+    }
+    let (rapier, canopy) = sums.iter().fold((0.0, 0.0), |a, s| (a.0 + s.1, a.1 + s.2));
+    println!("{name}: medians of {REPS} runs, {} updates", rest.len());
+    for (kind, s) in KINDS.iter().zip(&sums) {
+        if s.0 > 0 {
+            println!(
+                "  {kind:>12}: {:4} updates, rapier {:8.2} ms, canopy {:8.2} ms ({:4.1}% of canopy's), ratio {:5.2}",
+                s.0,
+                s.1 * 1e3,
+                s.2 * 1e3,
+                100.0 * s.2 / canopy,
+                s.1 / s.2
+            );
+        }
+    }
+    println!(
+        "  {:>12}: rapier {:8.2} ms, canopy {:8.2} ms, ratio {:5.2}",
+        "all",
+        rapier * 1e3,
+        canopy * 1e3,
+        rapier / canopy
+    );
 }
