@@ -74,6 +74,9 @@ fn prefetch_tail(rb: &RigidBody) {
 /// look ahead: doing it always cost `balls` about 10%.
 const SHAPE_AHEAD: usize = 8;
 
+/// `shape_kinds` entry of an id with no shape seen.
+const NO_KIND: u8 = u8::MAX;
+
 /// Updates between two checks of whether shapes are scattered (64 cache misses each).
 const SHAPE_CHECK_INTERVAL: u32 = 8;
 
@@ -207,8 +210,13 @@ pub struct CanopyBroadPhase {
     shape_hints: Vec<usize>,
     /// Reused buffer: the shape hints of this update's modified colliders, in handle order.
     shape_queue: Vec<usize>,
-    /// The last answer of `shapes_look_scattered`, and the updates since the first check.
+    /// Per proxy id: the type of the collider's shape at its last full examination
+    /// (`ShapeType as u8`, `NO_KIND` for none), a hint for `shapes_look_mixed`.
+    shape_kinds: Vec<u8>,
+    /// The last answers of `shapes_look_scattered` and `shapes_look_mixed`, and the updates
+    /// since the first check.
     shapes_scattered: bool,
+    shapes_mixed: bool,
     shape_checks: u32,
     /// Ids written by the fast path of step 2; the first `leaver_count` are proxies whose
     /// exact box left their fat box this update.
@@ -320,6 +328,25 @@ impl CanopyBroadPhase {
         far > SAMPLES / 4
     }
 
+    /// `true` when neighbouring proxy ids (neighbours in the examine loop) often have shapes of
+    /// different types: more than a quarter of 64 pairs, spread over the ids (`spawn_storm`'s
+    /// mix of balls, cuboids and capsules; not scenes of one shape on a ground).
+    fn shapes_look_mixed(&self) -> bool {
+        const SAMPLES: usize = 64;
+        let kinds = &self.shape_kinds;
+        if kinds.len() < 2 {
+            return false;
+        }
+        let different = (0..SAMPLES)
+            .map(|j| j * (kinds.len() - 1) / SAMPLES)
+            .filter(|&i| {
+                let (a, b) = (kinds[i], kinds[i + 1]);
+                a != NO_KIND && b != NO_KIND && a != b
+            })
+            .count();
+        different > SAMPLES / 4
+    }
+
     /// Drops a proxy and its pairs without events (the collider is gone or disabled).
     fn remove_proxy(&mut self, id: u32) {
         let Some(mut p) = self.proxies.get_mut(id as usize).and_then(Option::take) else {
@@ -357,15 +384,23 @@ impl CanopyBroadPhase {
     }
 
     /// The box the narrow phase needs covered: Rapier's collision box (prediction distance),
-    /// merged with the box at the soft-CCD predicted pose.
+    /// merged with the box at the soft-CCD predicted pose. `written_out`: through
+    /// `shape_box::collision_box` (the same box, bit for bit), else through parry's virtual
+    /// `compute_aabb` (the better choice where neighbouring colliders' shapes differ: one
+    /// unpredictable call instead of an unpredictable call and an unpredictable branch).
     #[inline(always)]
     fn collision_aabb(
         params: &IntegrationParameters,
         collider: &Collider,
         parent: Option<&RigidBody>,
+        written_out: bool,
     ) -> Aabb {
         let prediction = params.prediction_distance();
-        let mut aabb = collider.compute_collision_aabb(prediction / 2.0);
+        let mut aabb = if written_out {
+            crate::shape_box::collision_box(collider, prediction / 2.0)
+        } else {
+            collider.compute_collision_aabb(prediction / 2.0)
+        };
         if let Some(rb) = parent {
             if rb.soft_ccd_prediction() > 0.0 {
                 aabb.merge(&Self::soft_ccd_aabb(params, collider, rb));
@@ -434,7 +469,7 @@ impl CanopyBroadPhase {
     /// fast path with a parent body, returns that body: the caller still has to compare its
     /// body type with the proxy's (`check_body_types`).
     #[allow(clippy::too_many_arguments)]
-    fn examine<'b>(
+    fn examine<'b, const WRITTEN_OUT: bool>(
         &mut self,
         params: &IntegrationParameters,
         colliders: &ColliderSet,
@@ -457,7 +492,7 @@ impl CanopyBroadPhase {
                 && p.is_valid()
                 && p.filter.same_as_but_body_type(collider, parent.is_some())
             {
-                let tight = Self::collision_aabb(params, collider, parent);
+                let tight = Self::collision_aabb(params, collider, parent, WRITTEN_OUT);
                 self.tights[id as usize] = tight;
                 // Whether the exact box left the fat box waits on the collider's memory: no
                 // branch on it here (a misprediction would stall the loop until that load
@@ -586,7 +621,7 @@ impl CanopyBroadPhase {
             self.remove_proxy(id);
             return;
         }
-        let tight = Self::collision_aabb(params, collider, parent);
+        let tight = Self::collision_aabb(params, collider, parent, true);
         let filter = FilterData::new(collider, parent);
         let mobility = Mobility::of(filter.body_type);
         let fat = Self::fat_box(velocity_steps, &tight, margins, params, parent);
@@ -596,6 +631,7 @@ impl CanopyBroadPhase {
             self.proxies.resize_with(id as usize + 1, || None);
             self.tights.resize(id as usize + 1, Aabb::EMPTY);
             self.shape_hints.resize(id as usize + 1, 0);
+            self.shape_kinds.resize(id as usize + 1, NO_KIND);
         }
         let existing = self.proxies[id as usize].take();
         let mut p = match existing {
@@ -606,6 +642,7 @@ impl CanopyBroadPhase {
                 }
                 self.tights[id as usize] = tight;
                 self.shape_hints[id as usize] = shape_address(collider);
+                self.shape_kinds[id as usize] = collider.shape().shape_type() as u8;
                 let mut p = Proxy {
                     handle,
                     fat,
@@ -647,6 +684,7 @@ impl CanopyBroadPhase {
 
         self.tights[id as usize] = tight;
         self.shape_hints[id as usize] = shape_address(collider);
+        self.shape_kinds[id as usize] = collider.shape().shape_type() as u8;
         let mut moved = false;
         if p.filter != filter {
             let had_ff = p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED);
@@ -1119,6 +1157,7 @@ impl BroadPhase for CanopyBroadPhase {
         shape_queue.clear();
         if self.shape_checks % SHAPE_CHECK_INTERVAL == 0 {
             self.shapes_scattered = self.shapes_look_scattered();
+            self.shapes_mixed = self.shapes_look_mixed();
         }
         self.shape_checks = self.shape_checks.wrapping_add(1);
         if self.shapes_scattered {
@@ -1126,6 +1165,7 @@ impl BroadPhase for CanopyBroadPhase {
             shape_queue
                 .extend(SetBits::new(&bits).map(|i| hints.get(i as usize).copied().unwrap_or(0)));
         }
+        let shapes_mixed = self.shapes_mixed;
         let mut visited = 0;
         for (w, &word) in bits.iter().enumerate() {
             let mut word = word;
@@ -1138,7 +1178,13 @@ impl BroadPhase for CanopyBroadPhase {
                 }
                 visited += 1;
                 let handle = ColliderHandle::from_raw_parts(index, generations[index as usize]);
-                if let Some(rb) = self.examine(params, colliders, bodies, handle, margins, events) {
+                // The collision box's path is chosen once per update (`collision_aabb`).
+                let examined = if shapes_mixed {
+                    self.examine::<false>(params, colliders, bodies, handle, margins, events)
+                } else {
+                    self.examine::<true>(params, colliders, bodies, handle, margins, events)
+                };
+                if let Some(rb) = examined {
                     prefetch_tail(rb);
                     body_checks.push((index, rb));
                     if body_checks.len() == BODY_CHECK_CHUNK {
@@ -1288,6 +1334,42 @@ mod tests {
         assert_eq!((t.updates, t.moved), (counted, moved));
         assert!(counted > 0 && t.total() > std::time::Duration::ZERO);
         assert_eq!(bp.take_phase_times(), crate::PhaseTimes::default());
+    }
+
+    /// The two paths of the collision box (`shape_box::collision_box`, parry's virtual
+    /// `compute_aabb`) give the same events and the same exact boxes, update by update, on a
+    /// scene of balls, cuboids and capsules (`spawn_storm`, whose mix `shapes_look_mixed`
+    /// tells apart from scenes of one shape).
+    #[test]
+    fn both_collision_box_paths_agree() {
+        let updates = record(spawn_storm(Size::Small), 60);
+        let (mut written, mut virtual_call) = (CanopyBroadPhase::new(), CanopyBroadPhase::new());
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        let mut events = 0;
+        for (k, u) in updates.iter().enumerate() {
+            // A count that is no multiple of the interval: the flags stay as set here.
+            for (bp, mixed) in [(&mut written, false), (&mut virtual_call, true)] {
+                bp.shapes_mixed = mixed;
+                bp.shape_checks = 1;
+            }
+            a.clear();
+            b.clear();
+            u.apply(&mut written, &mut a);
+            u.apply(&mut virtual_call, &mut b);
+            assert_eq!(plain(&a), plain(&b), "update {k}");
+            let bits = |bp: &CanopyBroadPhase| -> Vec<[u32; 6]> {
+                bp.tights
+                    .iter()
+                    .map(|t| {
+                        [t.min.x, t.min.y, t.min.z, t.max.x, t.max.y, t.max.z].map(f32::to_bits)
+                    })
+                    .collect()
+            };
+            assert_eq!(bits(&written), bits(&virtual_call), "update {k}");
+            events += a.len();
+        }
+        assert!(events > 0);
+        assert!(virtual_call.shapes_look_mixed());
     }
 
     fn plain(events: &[BroadPhasePairEvent]) -> Vec<(bool, ColliderHandle, ColliderHandle)> {

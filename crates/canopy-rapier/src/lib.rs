@@ -21,6 +21,7 @@ mod phase_times;
 mod proxy;
 mod proxy_tree;
 mod queries;
+mod shape_box;
 mod stats;
 
 pub use broad_phase::CanopyBroadPhase;
