@@ -17,6 +17,10 @@ use rapier3d::parry::shape::TypedShape;
 #[inline(always)]
 pub(crate) fn collision_box(collider: &Collider, prediction: Real) -> ParryAabb {
     let amount = collider.contact_skin() + prediction;
+    if amount.is_nan() || amount < 0.0 {
+        // Parry's loosening refuses a negative (or NaN) amount; its own path says so.
+        return collider.compute_collision_aabb(prediction);
+    }
     let pos = collider.position();
     let (mins, maxs) = match collider.shape().as_typed_shape() {
         TypedShape::Ball(b) => {
@@ -39,8 +43,7 @@ pub(crate) fn collision_box(collider: &Collider, prediction: Real) -> ParryAabb 
         }
         _ => return collider.compute_collision_aabb(prediction),
     };
-    // `Aabb::loosened`, whose check of the amount (it panics below zero) is kept.
-    assert!(amount >= 0.0, "The loosening margin must be positive.");
+    // `Aabb::loosened`.
     ParryAabb::new(
         Point::from(mins.map(|x| x + -amount)),
         Point::from(maxs.map(|x| x + amount)),
