@@ -621,7 +621,12 @@ impl CanopyBroadPhase {
             self.remove_proxy(id);
             return;
         }
-        let tight = Self::collision_aabb(params, collider, parent, true);
+        let tight = Self::collision_aabb(
+            params,
+            collider,
+            parent,
+            crate::shape_box::written_out_agrees(),
+        );
         let filter = FilterData::new(collider, parent);
         let mobility = Mobility::of(filter.body_type);
         let fat = Self::fat_box(velocity_steps, &tight, margins, params, parent);
@@ -1165,7 +1170,7 @@ impl BroadPhase for CanopyBroadPhase {
             shape_queue
                 .extend(SetBits::new(&bits).map(|i| hints.get(i as usize).copied().unwrap_or(0)));
         }
-        let shapes_mixed = self.shapes_mixed;
+        let shapes_mixed = self.shapes_mixed || !crate::shape_box::written_out_agrees();
         let mut visited = 0;
         for (w, &word) in bits.iter().enumerate() {
             let mut word = word;

@@ -6,12 +6,17 @@
 //! to matrix, absolute value, matrix times vector as nalgebra's `gemv` sums it, the quaternion
 //! rotation of a point, `f32::min`/`max` for the capsule's corners, then the loosening), which
 //! the tests check against `compute_collision_aabb` on random shapes and poses. Other shapes
-//! go through parry.
+//! go through parry. A build whose parry or nalgebra computes these boxes otherwise (another
+//! release) is caught at run time too: `written_out_agrees` compares both on a fixed set of
+//! shapes and poses once per process, and the broadphase keeps to parry's path when they
+//! differ.
 
-use rapier3d::geometry::Collider;
-use rapier3d::math::{Isometry, Point, Real, Vector};
+use rapier3d::geometry::{Collider, ColliderBuilder};
+use rapier3d::math::{Isometry, Point, Real, Translation, Vector};
+use rapier3d::na::{Quaternion, UnitQuaternion};
 use rapier3d::parry::bounding_volume::Aabb as ParryAabb;
 use rapier3d::parry::shape::TypedShape;
+use std::sync::OnceLock;
 
 /// `collider.compute_collision_aabb(prediction)`, bit for bit.
 #[inline(always)]
@@ -48,6 +53,49 @@ pub(crate) fn collision_box(collider: &Collider, prediction: Real) -> ParryAabb 
         Point::from(mins.map(|x| x + -amount)),
         Point::from(maxs.map(|x| x + amount)),
     )
+}
+
+/// Whether `collision_box` gives parry's boxes, bit for bit, on balls, cuboids and capsules in
+/// a fixed set of poses (rotations about every axis, translations of several magnitudes),
+/// checked on first use, once per process.
+pub(crate) fn written_out_agrees() -> bool {
+    static AGREES: OnceLock<bool> = OnceLock::new();
+    *AGREES.get_or_init(|| {
+        let shapes = [
+            ColliderBuilder::ball(0.5),
+            ColliderBuilder::cuboid(0.5, 0.25, 1.5),
+            ColliderBuilder::capsule_y(0.3, 0.4),
+            ColliderBuilder::capsule_from_endpoints(
+                Point::new(0.1, -0.7, 0.3),
+                Point::new(-0.4, 0.2, 0.9),
+                0.2,
+            ),
+        ];
+        let mut seed = 0x9e37_79b9_u32;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed as f32 / u32::MAX as f32 * 2.0 - 1.0
+        };
+        (0..64).all(|k| {
+            let q = Quaternion::new(next(), next(), next(), next());
+            let scale = [1.0, 100.0, 1.0e5][k % 3];
+            let t = Translation::new(next() * scale, next() * scale, next() * scale);
+            let pos = Isometry::from_parts(t, UnitQuaternion::from_quaternion(q));
+            let collider = shapes[k % shapes.len()]
+                .clone()
+                .position(pos)
+                .contact_skin(0.01 * (k % 2) as Real)
+                .build();
+            let (a, b) = (
+                collision_box(&collider, 0.001),
+                collider.compute_collision_aabb(0.001),
+            );
+            a.mins.coords.map(Real::to_bits) == b.mins.coords.map(Real::to_bits)
+                && a.maxs.coords.map(Real::to_bits) == b.maxs.coords.map(Real::to_bits)
+        })
+    })
 }
 
 /// `|R| v`, with `R` the rotation matrix of `pos`: nalgebra's `to_rotation_matrix` entry by
@@ -149,6 +197,12 @@ mod tests {
                 bits(&collider.compute_collision_aabb(prediction))
             );
         }
+    }
+
+    /// The run-time check passes with the parry and nalgebra this crate is built with.
+    #[test]
+    fn written_out_agrees_here() {
+        assert!(written_out_agrees());
     }
 
     /// Shapes not written out here go through parry, and non-finite poses give what parry
