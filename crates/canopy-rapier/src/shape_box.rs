@@ -4,7 +4,8 @@
 //! matrix code. The result is the same to the bit: every coordinate is computed by the same
 //! floating-point operations in the same order as parry 0.22 and nalgebra 0.33 do (quaternion
 //! to matrix, absolute value, matrix times vector as nalgebra's `gemv` sums it, the quaternion
-//! rotation of a point, `f32::min`/`max` for the capsule's corners, then the loosening), which
+//! rotation of a point, simba's `simd_min`/`simd_max` for the capsule's corners, then the
+//! loosening), which
 //! the tests check against `compute_collision_aabb` on random shapes and poses. Other shapes
 //! go through parry. A build whose parry or nalgebra computes these boxes otherwise (another
 //! release) is caught at run time too: `written_out_agrees` compares both on a fixed set of
@@ -41,9 +42,14 @@ pub(crate) fn collision_box(collider: &Collider, prediction: Real) -> ParryAabb 
             let a = transform_point(pos, &c.segment.a);
             let b = transform_point(pos, &c.segment.b);
             let r = c.radius;
+            // nalgebra's `inf`/`sup` (simba's `simd_min`/`simd_max`): the first operand unless
+            // the comparison fails, which differs from `f32::min`/`max` on NaNs and signed
+            // zeros.
+            let min = |x: Real, y: Real| if x <= y { x } else { y };
+            let max = |x: Real, y: Real| if x >= y { x } else { y };
             (
-                Vector::new(a.x.min(b.x), a.y.min(b.y), a.z.min(b.z)).map(|x| x - r),
-                Vector::new(a.x.max(b.x), a.y.max(b.y), a.z.max(b.z)).map(|x| x + r),
+                Vector::new(min(a.x, b.x), min(a.y, b.y), min(a.z, b.z)).map(|x| x - r),
+                Vector::new(max(a.x, b.x), max(a.y, b.y), max(a.z, b.z)).map(|x| x + r),
             )
         }
         _ => return collider.compute_collision_aabb(prediction),
@@ -203,6 +209,31 @@ mod tests {
     #[test]
     fn written_out_agrees_here() {
         assert!(written_out_agrees());
+    }
+
+    /// Capsules whose endpoints tie on an axis with zeros of both signs, or where one endpoint
+    /// is NaN: nalgebra's corner picks (the first operand unless the comparison fails) decide
+    /// the bits, and `f32::min`/`max` would pick otherwise.
+    #[test]
+    fn capsule_corners_tie_as_in_nalgebra() {
+        // A NaN coordinate spreads to the whole rotated point (0 * NaN in the cross products).
+        let ends = [
+            (point![0.0, -1.0, -0.0], point![-0.0, 1.0, 0.0]),
+            (point![-0.0, -1.0, 0.0], point![0.0, 1.0, -0.0]),
+            (point![0.5, -1.0, 0.0], point![f32::NAN, 1.0, 2.0]),
+            (point![f32::NAN, -1.0, 0.0], point![0.5, 1.0, 2.0]),
+        ];
+        for ((a, b), t) in ends.into_iter().flat_map(|e| [(e, 0.0), (e, -0.0)]) {
+            let collider = ColliderBuilder::capsule_from_endpoints(a, b, 0.0)
+                .translation(vector![t, t, t])
+                .contact_skin(0.0)
+                .build();
+            assert_eq!(
+                bits(&collision_box(&collider, 0.0)),
+                bits(&collider.compute_collision_aabb(0.0)),
+                "{a:?} {b:?} at {t:?}"
+            );
+        }
     }
 
     /// Shapes not written out here go through parry, and non-finite poses give what parry
