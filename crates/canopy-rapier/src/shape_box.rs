@@ -5,12 +5,11 @@
 //! floating-point operations in the same order as parry 0.22 and nalgebra 0.33 do (quaternion
 //! to matrix, absolute value, matrix times vector as nalgebra's `gemv` sums it, the quaternion
 //! rotation of a point, simba's `simd_min`/`simd_max` for the capsule's corners, then the
-//! loosening), which
-//! the tests check against `compute_collision_aabb` on random shapes and poses. Other shapes
-//! go through parry. A build whose parry or nalgebra computes these boxes otherwise (another
-//! release) is caught at run time too: `written_out_agrees` compares both on a fixed set of
-//! shapes and poses once per process, and the broadphase keeps to parry's path when they
-//! differ.
+//! loosening), which the tests check against `compute_collision_aabb` on random shapes and
+//! poses. Other shapes go through parry. A build whose parry or nalgebra computes these boxes
+//! otherwise (another release) is caught at run time too: `written_out_agrees` compares both on
+//! a fixed set of shapes and poses once per process, and the broadphase keeps to parry's path
+//! when they differ.
 
 use rapier3d::geometry::{Collider, ColliderBuilder};
 use rapier3d::math::{Isometry, Point, Real, Translation, Vector};
