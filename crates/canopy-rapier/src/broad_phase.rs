@@ -77,13 +77,28 @@ const SHAPE_AHEAD: usize = 8;
 /// `shape_kinds` entry of an id with no shape seen.
 const NO_KIND: u8 = u8::MAX;
 
-/// Updates between two checks of whether shapes are scattered (64 cache misses each).
+/// Updates between two checks of whether shapes are scattered (64 cache misses each) or of
+/// mixed types.
 const SHAPE_CHECK_INTERVAL: u32 = 8;
 
 /// The address of the data of `collider`'s shape, for `shape_hints`.
 #[inline(always)]
 fn shape_address(collider: &Collider) -> usize {
     std::sync::Arc::as_ptr(&collider.shared_shape().0).cast::<u8>() as usize
+}
+
+/// `true` when more than a quarter of 64 pairs of neighbouring entries of `v` (`i`, `i + 1`),
+/// spread over `v`, satisfy `differ`.
+fn neighbours_often_differ<T: Copy>(v: &[T], differ: impl Fn(T, T) -> bool) -> bool {
+    const SAMPLES: usize = 64;
+    if v.len() < 2 {
+        return false;
+    }
+    let count = (0..SAMPLES)
+        .map(|j| j * (v.len() - 1) / SAMPLES)
+        .filter(|&i| differ(v[i], v[i + 1]))
+        .count();
+    count > SAMPLES / 4
 }
 
 /// The set bits of a bitmap, in order (the examine loop walks its words by hand instead,
@@ -308,43 +323,30 @@ impl CanopyBroadPhase {
     }
 
     /// `true` when the shapes of the colliders seem scattered over the heap rather than laid
-    /// out in collider order (where the hardware prefetcher already streams them): more than a
-    /// quarter of 64 pairs of neighbouring proxy ids, spread over the ids, have shapes more than
-    /// 512 bytes apart. Shapes allocated one after the other when the world was built are
-    /// neighbours; those of colliders added later to reused slots are not (`spawn_storm`).
+    /// out in collider order (where the hardware prefetcher already streams them): neighbouring
+    /// proxy ids often have shapes more than 512 bytes apart. Shapes allocated one after the
+    /// other when the world was built are neighbours; those of colliders added later to reused
+    /// slots are not (`spawn_storm`).
     fn shapes_look_scattered(&self) -> bool {
-        const SAMPLES: usize = 64;
-        let hints = &self.shape_hints;
-        if hints.len() < 2 {
-            return false;
-        }
-        let far = (0..SAMPLES)
-            .map(|j| j * (hints.len() - 1) / SAMPLES)
-            .filter(|&i| {
-                let (a, b) = (hints[i], hints[i + 1]);
-                a != 0 && b != 0 && a.abs_diff(b) > 512
-            })
-            .count();
-        far > SAMPLES / 4
+        neighbours_often_differ(&self.shape_hints, |a, b| {
+            a != 0 && b != 0 && a.abs_diff(b) > 512
+        })
     }
 
     /// `true` when neighbouring proxy ids (neighbours in the examine loop) often have shapes of
-    /// different types: more than a quarter of 64 pairs, spread over the ids (`spawn_storm`'s
-    /// mix of balls, cuboids and capsules; not scenes of one shape on a ground).
+    /// different types (`spawn_storm`'s mix of balls, cuboids and capsules; not scenes of one
+    /// shape on a ground).
     fn shapes_look_mixed(&self) -> bool {
-        const SAMPLES: usize = 64;
-        let kinds = &self.shape_kinds;
-        if kinds.len() < 2 {
-            return false;
-        }
-        let different = (0..SAMPLES)
-            .map(|j| j * (kinds.len() - 1) / SAMPLES)
-            .filter(|&i| {
-                let (a, b) = (kinds[i], kinds[i + 1]);
-                a != NO_KIND && b != NO_KIND && a != b
-            })
-            .count();
-        different > SAMPLES / 4
+        neighbours_often_differ(&self.shape_kinds, |a, b| {
+            a != NO_KIND && b != NO_KIND && a != b
+        })
+    }
+
+    /// Records where the collider's shape is and its type, the hints of `shapes_look_scattered`
+    /// and `shapes_look_mixed` (at a full examination; the fast path reads neither).
+    fn note_shape(&mut self, id: u32, collider: &Collider) {
+        self.shape_hints[id as usize] = shape_address(collider);
+        self.shape_kinds[id as usize] = collider.shape().shape_type() as u8;
     }
 
     /// Drops a proxy and its pairs without events (the collider is gone or disabled).
@@ -646,8 +648,7 @@ impl CanopyBroadPhase {
                     self.fixed_fixed += 1;
                 }
                 self.tights[id as usize] = tight;
-                self.shape_hints[id as usize] = shape_address(collider);
-                self.shape_kinds[id as usize] = collider.shape().shape_type() as u8;
+                self.note_shape(id, collider);
                 let mut p = Proxy {
                     handle,
                     fat,
@@ -688,8 +689,7 @@ impl CanopyBroadPhase {
         }
 
         self.tights[id as usize] = tight;
-        self.shape_hints[id as usize] = shape_address(collider);
-        self.shape_kinds[id as usize] = collider.shape().shape_type() as u8;
+        self.note_shape(id, collider);
         let mut moved = false;
         if p.filter != filter {
             let had_ff = p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED);
