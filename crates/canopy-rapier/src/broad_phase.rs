@@ -25,7 +25,7 @@
 //! 6. Liveness: every collider Rapier reported checks its candidates that are not live yet;
 //!    those whose exact boxes now overlap become live (`AddPair`).
 
-use crate::config::CanopyBroadPhaseConfig;
+use crate::config::{CanopyBroadPhaseConfig, ConfigError};
 use crate::filter::{FilterData, Mobility};
 use crate::pair_set::{unkey, PairSet};
 use crate::proxy::{Loc, Proxy};
@@ -237,6 +237,9 @@ pub struct CanopyBroadPhase {
     /// exact box left their fat box this update.
     leavers: Vec<u32>,
     leaver_count: usize,
+    /// Colliders examined in this update whose loosening was negative or NaN
+    /// (`collision_aabb`).
+    negative_loosening: usize,
     /// Reused buffers: a bitmap of the modified handles' indices (all zero between updates;
     /// step 6 reads it) and their generations.
     scratch_order: (Vec<u64>, Vec<u32>),
@@ -255,12 +258,24 @@ impl CanopyBroadPhase {
         Self::default()
     }
 
-    /// A broadphase with the given configuration.
-    pub fn with_config(config: CanopyBroadPhaseConfig) -> Self {
-        Self {
+    /// A broadphase with the given configuration, or the first field out of range
+    /// ([`CanopyBroadPhaseConfig::validate`]).
+    ///
+    /// ```
+    /// use canopy_rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig};
+    /// let config = CanopyBroadPhaseConfig { margin: 0.05, ..Default::default() };
+    /// let broad_phase = CanopyBroadPhase::with_config(config)?;
+    /// assert_eq!(broad_phase.config().margin, 0.05);
+    /// let negative = CanopyBroadPhaseConfig { velocity_steps: -1.0, ..Default::default() };
+    /// assert!(CanopyBroadPhase::with_config(negative).is_err());
+    /// # Ok::<(), canopy_rapier::ConfigError>(())
+    /// ```
+    pub fn with_config(config: CanopyBroadPhaseConfig) -> Result<Self, ConfigError> {
+        config.validate()?;
+        Ok(Self {
             config,
             ..Default::default()
-        }
+        })
     }
 
     /// The configuration.
@@ -390,18 +405,28 @@ impl CanopyBroadPhase {
     /// `shape_box::collision_box` (the same box, bit for bit), else through parry's virtual
     /// `compute_aabb` (the better choice where neighbouring colliders' shapes differ: one
     /// unpredictable call instead of an unpredictable call and an unpredictable branch).
+    ///
+    /// Where the loosening (contact skin plus half the prediction distance) is negative or NaN,
+    /// which makes parry's loosening (and so Rapier's own broadphase) panic, the box is the
+    /// shape's box, not loosened, and `negative_loosening` counts the collider. That box is
+    /// still a superset of the shape, so no pair the narrow phase could need is lost.
     #[inline(always)]
     fn collision_aabb(
         params: &IntegrationParameters,
         collider: &Collider,
         parent: Option<&RigidBody>,
         written_out: bool,
+        negative_loosening: &mut usize,
     ) -> Aabb {
-        let prediction = params.prediction_distance();
-        let mut aabb = if written_out {
-            crate::shape_box::collision_box(collider, prediction / 2.0)
+        let prediction = params.prediction_distance() / 2.0;
+        let amount = collider.contact_skin() + prediction;
+        let mut aabb = if amount.is_nan() || amount < 0.0 {
+            *negative_loosening += 1;
+            Self::unloosened_aabb(collider)
+        } else if written_out {
+            crate::shape_box::collision_box(collider, prediction)
         } else {
-            collider.compute_collision_aabb(prediction / 2.0)
+            collider.compute_collision_aabb(prediction)
         };
         if let Some(rb) = parent {
             if rb.soft_ccd_prediction() > 0.0 {
@@ -411,8 +436,15 @@ impl CanopyBroadPhase {
         Aabb::new(aabb.mins, aabb.maxs)
     }
 
+    /// The box of the collider's shape at its pose, not loosened (see `collision_aabb`).
+    #[cold]
+    #[inline(never)]
+    fn unloosened_aabb(collider: &Collider) -> rapier3d::parry::bounding_volume::Aabb {
+        collider.shape().compute_aabb(collider.position())
+    }
+
     /// The collider's box at the pose soft CCD predicts for its parent (rarely enabled, so out
-    /// of line).
+    /// of line), loosened as `collision_aabb` loosens (not at all where that is negative).
     #[cold]
     #[inline(never)]
     fn soft_ccd_aabb(
@@ -438,7 +470,7 @@ impl CanopyBroadPhase {
         collider
             .shape()
             .compute_aabb(&pose)
-            .loosened(collider.contact_skin() + prediction / 2.0)
+            .loosened((collider.contact_skin() + prediction / 2.0).max(0.0))
     }
 
     /// The fat box of an exact box: enlarged by the margin (`margins.1` for colliders of fixed
@@ -457,6 +489,11 @@ impl CanopyBroadPhase {
         if let Some(rb) = parent {
             let d = rb.linvel() * (params.dt * velocity_steps);
             for i in 0..3 {
+                // A NaN or infinite stretch (velocity or time step) is left out: the box
+                // without it is still valid, and the collider stays in the trees.
+                if !d[i].is_finite() {
+                    continue;
+                }
                 if d[i] < 0.0 {
                     fat.min[i] += d[i];
                 } else {
@@ -494,7 +531,13 @@ impl CanopyBroadPhase {
                 && p.is_valid()
                 && p.filter.same_as_but_body_type(collider, parent.is_some())
             {
-                let tight = Self::collision_aabb(params, collider, parent, WRITTEN_OUT);
+                let tight = Self::collision_aabb(
+                    params,
+                    collider,
+                    parent,
+                    WRITTEN_OUT,
+                    &mut self.negative_loosening,
+                );
                 self.tights[id as usize] = tight;
                 // Whether the exact box left the fat box waits on the collider's memory: no
                 // branch on it here (a misprediction would stall the loop until that load
@@ -628,6 +671,7 @@ impl CanopyBroadPhase {
             collider,
             parent,
             crate::shape_box::written_out_agrees(),
+            &mut self.negative_loosening,
         );
         let filter = FilterData::new(collider, parent);
         let mobility = Mobility::of(filter.body_type);
@@ -1118,6 +1162,7 @@ impl BroadPhase for CanopyBroadPhase {
             self.stats.moved = 0;
             self.stats.added = 0;
             self.stats.deleted = 0;
+            self.stats.negative_loosening = 0;
             return;
         }
         #[cfg(feature = "phase-times")]
@@ -1131,10 +1176,12 @@ impl BroadPhase for CanopyBroadPhase {
 
         lap!(self, clock, removals);
         // 2. Re-examine every modified collider.
+        // A negative or NaN `length_unit` gives margins of 0: smaller fat boxes would lose pairs.
         let margins = (
-            self.config.margin * params.length_unit,
-            self.config.fixed_margin * params.length_unit,
+            (self.config.margin * params.length_unit).max(0.0),
+            (self.config.fixed_margin * params.length_unit).max(0.0),
         );
+        self.negative_loosening = 0;
         // In handle order (a bitmap of the modified indices, read back in order): the collider
         // arena and the proxies are then read front to back, which the hardware prefetcher
         // turns into streaming instead of one cache miss per collider.
@@ -1292,6 +1339,7 @@ impl BroadPhase for CanopyBroadPhase {
         self.stats.moved = moved.len();
         self.stats.deleted = deleted;
         self.stats.added = added;
+        self.stats.negative_loosening = self.negative_loosening;
         self.moved = moved;
         self.moved.clear();
         lap!(self, clock, finish);

@@ -1,7 +1,32 @@
 //! Configuration of [`crate::CanopyBroadPhase`]: fat-box margin, tree rebuild policy,
-//! parallelism. Every field has a documented default.
+//! parallelism. Every field has a documented default, and [`CanopyBroadPhaseConfig::validate`]
+//! says which values are refused ([`ConfigError`]).
 
 use canopy_core::Builder;
+use thiserror::Error;
+
+/// A field of [`CanopyBroadPhaseConfig`] out of its range, from
+/// [`CanopyBroadPhaseConfig::validate`] and [`crate::CanopyBroadPhase::with_config`].
+#[derive(Clone, Copy, Debug, PartialEq, Error)]
+pub enum ConfigError {
+    /// A fat-box margin or the velocity stretch is negative, NaN or infinite. A negative one
+    /// would store boxes smaller than the colliders' own and lose pairs.
+    #[error("{field} must be finite and at least 0, got {value}")]
+    NegativeOrNotFinite {
+        /// The field's name (`margin`, `fixed_margin` or `velocity_steps`).
+        field: &'static str,
+        /// The value given.
+        value: f32,
+    },
+    /// A fraction or factor of the rebuild policy is negative or NaN.
+    #[error("rebuild.{field} must be at least 0 (and not NaN), got {value}")]
+    NegativeOrNan {
+        /// The field's name (`max_cost_growth`, `pending_fraction` or `max_dead_fraction`).
+        field: &'static str,
+        /// The value given.
+        value: f64,
+    },
+}
 
 /// When and how the trees of moving colliders are rebuilt.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -64,6 +89,44 @@ pub struct CanopyBroadPhaseConfig {
     /// Search new pairs and rebuild trees with rayon (the current pool). Results and event order
     /// are the same with any number of threads. Default: `true`.
     pub parallel: bool,
+}
+
+impl CanopyBroadPhaseConfig {
+    /// `Ok` when every field is in range: the margins and the velocity stretch finite and at
+    /// least 0; the rebuild policy's `max_cost_growth`, `pending_fraction` and
+    /// `max_dead_fraction` at least 0 (infinity allowed: never rebuild for that reason).
+    ///
+    /// ```
+    /// use canopy_rapier::{CanopyBroadPhaseConfig, ConfigError};
+    /// assert!(CanopyBroadPhaseConfig::default().validate().is_ok());
+    /// let shrinking = CanopyBroadPhaseConfig { margin: -0.1, ..Default::default() };
+    /// assert!(matches!(
+    ///     shrinking.validate(),
+    ///     Err(ConfigError::NegativeOrNotFinite { field: "margin", .. })
+    /// ));
+    /// ```
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        for (field, value) in [
+            ("margin", self.margin),
+            ("fixed_margin", self.fixed_margin),
+            ("velocity_steps", self.velocity_steps),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(ConfigError::NegativeOrNotFinite { field, value });
+            }
+        }
+        let policy = &self.rebuild;
+        for (field, value) in [
+            ("max_cost_growth", policy.max_cost_growth),
+            ("pending_fraction", policy.pending_fraction),
+            ("max_dead_fraction", policy.max_dead_fraction),
+        ] {
+            if value.is_nan() || value < 0.0 {
+                return Err(ConfigError::NegativeOrNan { field, value });
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Default for CanopyBroadPhaseConfig {

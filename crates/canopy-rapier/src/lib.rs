@@ -25,7 +25,7 @@ mod shape_box;
 mod stats;
 
 pub use broad_phase::CanopyBroadPhase;
-pub use config::{CanopyBroadPhaseConfig, RebuildPolicy};
+pub use config::{CanopyBroadPhaseConfig, ConfigError, RebuildPolicy};
 pub use filter::Mobility;
 #[cfg(feature = "phase-times")]
 pub use phase_times::PhaseTimes;

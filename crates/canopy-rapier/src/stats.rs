@@ -18,6 +18,10 @@ pub struct BroadPhaseStats {
     pub added: usize,
     /// `DeletePair` events of the last update.
     pub deleted: usize,
+    /// Colliders examined in the last update whose loosening, contact skin plus half the
+    /// prediction distance, was negative or NaN (parry refuses it: Rapier's own broadphase
+    /// panics). Their box is their shape's box, not loosened; they keep all their pairs.
+    pub negative_loosening: usize,
     /// Tree rebuilds since creation (all trees).
     pub rebuilds: u64,
     /// Tree refits since creation (all trees).

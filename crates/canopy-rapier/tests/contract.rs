@@ -6,7 +6,7 @@
 //! The truth is brute force over all collider pairs, with Rapier's filter rules as restated
 //! (independently of `filter.rs`) by the measuring harness's `narrow_phase_filter`.
 
-use canopy_rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig};
+use canopy_rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig, ConfigError};
 use canopy_scenes::harness::{handle_pair, narrow_phase_filter, HandlePair};
 use proptest::prelude::*;
 use rapier3d::prelude::*;
@@ -28,7 +28,7 @@ struct Checked {
 impl Checked {
     fn new(config: CanopyBroadPhaseConfig) -> Self {
         Self {
-            inner: CanopyBroadPhase::with_config(config),
+            inner: CanopyBroadPhase::with_config(config).expect("valid configuration"),
             replay: HashSet::new(),
             log: Vec::new(),
             violations: Vec::new(),
@@ -40,6 +40,18 @@ impl Checked {
 
 fn valid(a: &rapier3d::parry::bounding_volume::Aabb) -> bool {
     a.mins.iter().chain(a.maxs.iter()).all(|c| c.is_finite())
+}
+
+/// The box the narrow phase needs covered: Rapier's collision box
+/// (`Collider::compute_collision_aabb`), except where its loosening (contact skin plus half the
+/// prediction distance) is negative or NaN, where parry panics: there, the shape's own box,
+/// which still contains the shape.
+fn needed_box(c: &Collider, half_prediction: f32) -> rapier3d::parry::bounding_volume::Aabb {
+    if c.contact_skin() + half_prediction >= 0.0 {
+        c.compute_collision_aabb(half_prediction)
+    } else {
+        c.compute_aabb()
+    }
 }
 
 impl BroadPhase for Checked {
@@ -92,7 +104,7 @@ impl BroadPhase for Checked {
         let prediction = params.prediction_distance() / 2.0;
         let invalid = colliders
             .iter()
-            .filter(|(_, c)| c.is_enabled() && !valid(&c.compute_collision_aabb(prediction)))
+            .filter(|(_, c)| c.is_enabled() && !valid(&needed_box(c, prediction)))
             .count();
         if invalid != self.inner.stats().invalid {
             self.violations.push(format!(
@@ -105,7 +117,7 @@ impl BroadPhase for Checked {
         let all: Vec<(ColliderHandle, &Collider, _)> = colliders
             .iter()
             .filter(|(_, c)| c.is_enabled())
-            .map(|(h, c)| (h, c, c.compute_collision_aabb(prediction)))
+            .map(|(h, c)| (h, c, needed_box(c, prediction)))
             .collect();
         for (i, (h1, c1, a1)) in all.iter().enumerate() {
             for (h2, c2, a2) in &all[i + 1..] {
@@ -502,4 +514,154 @@ fn huge_coordinates_do_not_panic() {
     }
     assert!(bp.inner.fat_aabb(far).is_some());
     assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+}
+
+proptest! {
+    /// A configuration is accepted exactly when its margins and velocity stretch are finite and
+    /// at least 0 and its rebuild fractions are at least 0; a refused one names its field.
+    #[test]
+    fn configurations_are_accepted_exactly_when_in_range(
+        margin in prop_oneof![-1.0f32..1.0, Just(f32::NAN), Just(f32::INFINITY)],
+        fixed_margin in prop_oneof![0.0f32..1.0, -1.0f32..0.0, Just(f32::NAN)],
+        velocity_steps in prop_oneof![0.0f32..20.0, -20.0f32..0.0, Just(f32::NEG_INFINITY)],
+        max_cost_growth in prop_oneof![0.0f64..4.0, -1.0f64..0.0, Just(f64::INFINITY), Just(f64::NAN)],
+        pending_fraction in prop_oneof![0.0f64..1.0, Just(-0.5), Just(f64::NAN)],
+        max_dead_fraction in prop_oneof![0.0f64..1.0, Just(-0.5), Just(f64::NAN)],
+    ) {
+        let mut config = CanopyBroadPhaseConfig {
+            margin,
+            fixed_margin,
+            velocity_steps,
+            ..Default::default()
+        };
+        config.rebuild.max_cost_growth = max_cost_growth;
+        config.rebuild.pending_fraction = pending_fraction;
+        config.rebuild.max_dead_fraction = max_dead_fraction;
+        let in_range = |x: f32| x.is_finite() && x >= 0.0;
+        let bad_f32 = [("margin", margin), ("fixed_margin", fixed_margin), ("velocity_steps", velocity_steps)]
+            .into_iter()
+            .find(|&(_, x)| !in_range(x));
+        let bad_f64 = [
+            ("max_cost_growth", max_cost_growth),
+            ("pending_fraction", pending_fraction),
+            ("max_dead_fraction", max_dead_fraction),
+        ]
+        .into_iter()
+        .find(|&(_, x)| x.is_nan() || x < 0.0);
+        match (CanopyBroadPhase::with_config(config), bad_f32, bad_f64) {
+            (Ok(bp), None, None) => prop_assert_eq!(bp.config(), &config),
+            (Err(ConfigError::NegativeOrNotFinite { field, .. }), Some((bad, _)), _) => {
+                prop_assert_eq!(field, bad)
+            }
+            (Err(ConfigError::NegativeOrNan { field, .. }), None, Some((bad, _))) => {
+                prop_assert_eq!(field, bad)
+            }
+            (got, f, d) => prop_assert!(false, "{:?} for {:?} {:?}", got.map(|_| ()), f, d),
+        }
+    }
+}
+
+#[test]
+fn negative_or_nan_loosening_keeps_every_pair() {
+    // Colliders whose contact skin makes the loosening negative or NaN (parry's loosening, and
+    // so Rapier's own broadphase, panics on them), among ordinary ones, stepped under random
+    // edits: nothing panics, they are counted, and the contract holds against their shapes'
+    // own boxes.
+    let mut rng = Rng(2024);
+    let mut sim = new_sim(&mut rng, 60);
+    let handles: Vec<ColliderHandle> = sim.colliders.iter().map(|(h, _)| h).collect();
+    let odd: Vec<ColliderHandle> = handles.iter().copied().skip(1).step_by(4).collect();
+    for (k, &h) in odd.iter().enumerate() {
+        let skin = if k % 3 == 0 { f32::NAN } else { -0.5 };
+        sim.colliders[h].set_contact_skin(skin);
+    }
+    let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
+    // Every collider examined once: each odd one counted.
+    bp.update(
+        &sim.params,
+        &sim.colliders,
+        &sim.bodies,
+        &handles,
+        &[],
+        &mut Vec::new(),
+    );
+    assert_eq!(bp.inner.stats().negative_loosening, odd.len());
+    for _ in 0..40 {
+        for _ in 0..rng.below(4) {
+            random_edit(&mut sim, &mut rng);
+        }
+        step(&mut sim, &mut bp);
+    }
+    assert!(bp.checked_pairs > 0);
+    assert!(
+        bp.violations.is_empty(),
+        "{:#?}",
+        &bp.violations[..bp.violations.len().min(10)]
+    );
+    // With a valid skin again, a collider is loosened as usual.
+    for &h in &odd {
+        if let Some(c) = sim.colliders.get_mut(h) {
+            c.set_contact_skin(0.0);
+        }
+    }
+    let handles: Vec<ColliderHandle> = sim.colliders.iter().map(|(h, _)| h).collect();
+    bp.update(
+        &sim.params,
+        &sim.colliders,
+        &sim.bodies,
+        &handles,
+        &[],
+        &mut Vec::new(),
+    );
+    assert_eq!(bp.inner.stats().negative_loosening, 0);
+    step(&mut sim, &mut bp);
+    assert!(
+        bp.violations.is_empty(),
+        "{:#?}",
+        &bp.violations[..bp.violations.len().min(10)]
+    );
+}
+
+#[test]
+fn bad_integration_parameters_keep_every_pair() {
+    // Integration parameters are user input too: a negative or NaN length unit (margins and
+    // prediction distance with it) or time step, and NaN or infinite velocities, must neither
+    // panic nor shrink a box below the collider's nor drop a collider from the trees.
+    let mut rng = Rng(99);
+    let sim = new_sim(&mut rng, 80);
+    let (colliders, mut bodies) = (sim.colliders, sim.bodies);
+    let body_handles: Vec<RigidBodyHandle> = bodies.iter().map(|(h, _)| h).collect();
+    for (k, &h) in body_handles.iter().enumerate().filter(|(k, _)| k % 5 == 0) {
+        let bad = [f32::NAN, f32::INFINITY, -f32::INFINITY][k % 3];
+        bodies[h].set_linvel(vector![bad, 1.0, -bad], false);
+    }
+    let all: Vec<ColliderHandle> = colliders.iter().map(|(h, _)| h).collect();
+    for (length_unit, dt) in [
+        (-1.0, 1.0 / 60.0),
+        (f32::NAN, 1.0 / 60.0),
+        (1.0, f32::NAN),
+        (1.0, -0.5),
+    ] {
+        let params = IntegrationParameters {
+            length_unit,
+            dt,
+            ..Default::default()
+        };
+        let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
+        let mut events = Vec::new();
+        bp.update(&params, &colliders, &bodies, &all, &[], &mut events);
+        // A second update over the same colliders (each re-examined) changes nothing.
+        bp.update(&params, &colliders, &bodies, &all, &[], &mut events);
+        let stats = bp.inner.stats();
+        assert_eq!(
+            stats.invalid, 0,
+            "length unit {length_unit}, dt {dt}: {stats:?}"
+        );
+        assert!(bp.checked_pairs > 0);
+        assert!(
+            bp.violations.is_empty(),
+            "length unit {length_unit}, dt {dt}: {:#?}",
+            &bp.violations[..bp.violations.len().min(10)]
+        );
+    }
 }
