@@ -68,7 +68,10 @@ fn main() {
             if let Some(v) = var("CANOPY_DEAD_FRACTION") {
                 config.rebuild.max_dead_fraction = v as f64;
             }
-            Box::new(CanopyBroadPhase::with_config(config))
+            Box::new(CanopyBroadPhase::with_config(config).unwrap_or_else(|e| {
+                eprintln!("{e}");
+                std::process::exit(2)
+            }))
         }
     };
     if which == "split" {
@@ -85,7 +88,7 @@ fn main() {
             None => CanopyBroadPhaseConfig::default(),
         };
         let mut a = CanopyBroadPhase::new();
-        let mut b = CanopyBroadPhase::with_config(config);
+        let mut b = CanopyBroadPhase::with_config(config).expect("validated above");
         let mut floor = AabbFloor::default();
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
@@ -164,7 +167,7 @@ fn split(
         (0..REPS)
             .map(|_| {
                 let mut rapier = BroadPhaseBvh::new();
-                let mut canopy = CanopyBroadPhase::with_config(config);
+                let mut canopy = CanopyBroadPhase::with_config(config).expect("validated above");
                 let mut events = Vec::new();
                 first.apply(&mut rapier, &mut events);
                 first.apply(&mut canopy, &mut events);
