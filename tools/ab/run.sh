@@ -47,6 +47,7 @@ rapier3d = "=0.27.0"
 rayon = "1.10"
 rustc-hash = "2"
 smallvec = "1.13"
+thiserror = "2"
 TOML
 cat > "$ab/bench/Cargo.toml" <<TOML
 [package]
