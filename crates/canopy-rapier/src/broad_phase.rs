@@ -35,33 +35,48 @@ use crate::stats::BroadPhaseStats;
 use canopy_core::{Aabb, PairMarks};
 use rapier3d::prelude::*;
 
-/// The fast path's body-type checks (`check_body_types`) run in chunks of this many colliders,
-/// so that the body lines `prefetch_tail` asked for are still in the caches when read; the
-/// chunk's proxies whose exact box left their fat box get their new one (`refatten`) right
-/// after, while their collider and body are still cached too (`many_kinematics`, where one
-/// proxy in fifteen leaves: about 10% of the update, against refattening after the loop).
-const BODY_CHECK_CHUNK: usize = 256;
+/// The examine loop gives the proxies whose exact box left their fat box their new one
+/// (`refatten`) every this many colliders of the fast path, while their collider and body
+/// are still cached (`many_kinematics`, where one proxy in fifteen leaves: about 10% of the
+/// update, against refattening after the loop).
+const REFATTEN_CHUNK: usize = 256;
 
-/// Starts loading the last cache line of `rb`, where its body type sits: Rapier's `RigidBody`
-/// keeps its one-byte fields (body type, dominance, enabled) at its end, on another line than
-/// the fields the collision box reads. Only a hint: where that layout differs, the check reads
-/// the field as before, only without the head start. (A prefetch never faults and changes no
-/// memory, whatever the address.) Into the second-level cache only: loading the lines into the
-/// first level as well evicted what the examine loop was reading, and cost `many_kinematics`
-/// (27,000 bodies) about 13% in criterion, where this hint costs nothing measurable.
+/// The address of the last byte of `rb`: Rapier's `RigidBody` keeps its one-byte fields (body
+/// type, dominance, enabled) at its end, on another line than the fields the collision box
+/// reads. Only a prefetch hint: where that layout differs, the body type is read as before,
+/// only without the head start.
+fn body_tail_address(rb: &RigidBody) -> usize {
+    (rb as *const RigidBody as usize) + std::mem::size_of::<RigidBody>() - 1
+}
+
+/// The fast path compares the parent's body type with the one the proxy was filed under, with
+/// no branch on the result (an `|=` into a per-update flag; `check_body_types` finds the
+/// colliders when it is set). Where the bodies outgrow the caches (`DELAYED_BODY_BYTES`), the
+/// loop asks for the body's last line and compares this many fast-path colliders later, so
+/// that the read finds the line cached: `many_static`'s 125,000 bodies (52 MB) took 1.11x as
+/// long comparing at once, against 0.96x for comparing late (`tools/ab`, against the chunked
+/// checks before); `boxes` and `many_kinematics` (27,000 bodies, 11 MB) are faster comparing
+/// at once, `balls` the same either way.
+const BODY_TYPE_DELAY: usize = 16;
+
+/// Bodies taking more bytes than this (a last-level cache's worth) have their types compared
+/// late (`BODY_TYPE_DELAY`).
+const DELAYED_BODY_BYTES: usize = 16 << 20;
+
+/// Starts loading the cache line at `address` into the second-level cache. Only a hint: a
+/// prefetch never faults and changes no memory, whatever the address. (Into the first level
+/// as well, body lines evicted what the examine loop was reading: `many_kinematics` about 13%
+/// slower, with the chunked checks this replaced.)
 #[inline(always)]
-fn prefetch_tail(rb: &RigidBody) {
+fn prefetch_l2(address: usize) {
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is only a hint; the address is inside `rb`.
+    // SAFETY: a prefetch is only a hint; SSE is part of the x86-64 baseline.
     unsafe {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T1};
-        let last = (rb as *const RigidBody)
-            .cast::<i8>()
-            .wrapping_add(std::mem::size_of::<RigidBody>() - 1);
-        _mm_prefetch::<_MM_HINT_T1>(last);
+        _mm_prefetch::<_MM_HINT_T1>(address as *const i8);
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = rb;
+    let _ = address;
 }
 
 /// Where the colliders' shapes are scattered over the heap (`shapes_look_scattered`), the examine
@@ -136,6 +151,30 @@ impl Iterator for SetBits<'_> {
 
 /// Two proxy ids.
 type IdPair = (u32, u32);
+
+/// The inputs of step 2 (`examine_all`).
+#[derive(Clone, Copy)]
+struct ExaminePass<'a> {
+    params: &'a IntegrationParameters,
+    colliders: &'a ColliderSet,
+    bodies: &'a RigidBodySet,
+    /// Bitmap of the modified colliders' indices, and their generations.
+    modified: &'a [u64],
+    generations: &'a [u32],
+    /// Shape hints to prefetch, in the loop's order (empty where shapes are not scattered).
+    shape_queue: &'a [usize],
+    shapes_mixed: bool,
+    margins: (f32, f32),
+}
+
+/// What step 2 did with one collider.
+enum Examined<'b> {
+    /// The fast path; with a parent, the parent and the body type the proxy was filed under,
+    /// still to compare (`BODY_TYPE_DELAY`).
+    Fast(Option<(&'b RigidBody, RigidBodyType)>),
+    /// Anything else: the full examination, or a collider that is gone.
+    Full,
+}
 
 /// With the `phase-times` feature, adds the time since the last lap to phase `$field` of
 /// `$self.phase_times`; without it, nothing.
@@ -237,6 +276,9 @@ pub struct CanopyBroadPhase {
     /// exact box left their fat box this update.
     leavers: Vec<u32>,
     leaver_count: usize,
+    /// Compare body types late (`BODY_TYPE_DELAY`) whatever the bodies' size: for tests of
+    /// that path on small worlds.
+    delay_body_types: bool,
     /// Colliders examined in this update whose loosening was negative or NaN
     /// (`collision_aabb`).
     negative_loosening: usize,
@@ -505,9 +547,11 @@ impl CanopyBroadPhase {
     }
 
     /// Step 2 for one collider: the fast path here, everything else in `examine_full`. On the
-    /// fast path with a parent body, returns that body: the caller still has to compare its
-    /// body type with the proxy's (`check_body_types`).
+    /// fast path with a parent body, returns that body and the body type the proxy was filed
+    /// under: the caller still has to compare them (`examine_all`). Always inlined into
+    /// `examine_all`: called there, `balls` took about 1.1x as long.
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     fn examine<'b, const WRITTEN_OUT: bool>(
         &mut self,
         params: &IntegrationParameters,
@@ -516,9 +560,11 @@ impl CanopyBroadPhase {
         handle: ColliderHandle,
         margins: (f32, f32),
         events: &mut Vec<BroadPhasePairEvent>,
-    ) -> Option<&'b RigidBody> {
+    ) -> Examined<'b> {
         let id = handle.into_raw_parts().0;
-        let collider = colliders.get(handle)?;
+        let Some(collider) = colliders.get(handle) else {
+            return Examined::Full;
+        };
         let parent = collider.parent().and_then(|h| bodies.get(h));
         let enabled = collider.is_enabled();
 
@@ -551,34 +597,114 @@ impl CanopyBroadPhase {
                     self.leavers.push(id);
                     self.leaver_count += 1;
                 }
-                return parent;
+                return Examined::Fast(parent.map(|rb| (rb, p.filter.body_type)));
             }
         }
         self.examine_full(params, colliders, bodies, handle, margins, events);
-        None
+        Examined::Full
     }
 
-    /// Step 2, the fast path's last check: the parent's body type, for every proxy the fast
-    /// path passed (`checks`: proxy id and parent body, one chunk of `BODY_CHECK_CHUNK`). It
-    /// is the only field of the body on its cache line that the broadphase reads, so the fast
-    /// path only prefetches that line (`prefetch_tail`) and the field is read here in a short
-    /// loop, rather than in the long fast path, where each load stalled it. A proxy whose body
-    /// type changed gets the full examination.
+    /// Step 2 for every modified collider, in index order (the collider arena and the proxies
+    /// are then read front to back, which the hardware prefetcher streams): `examine` each,
+    /// compare the parent's body type of those on the fast path (at once, or with `DELAY`
+    /// `BODY_TYPE_DELAY` colliders late, after a prefetch), and give the leavers their new
+    /// fat boxes a chunk at a time. Returns whether some parent's body type changed
+    /// (`check_body_types` then finds which).
+    fn examine_all<const DELAY: bool>(
+        &mut self,
+        pass: &ExaminePass<'_>,
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) -> bool {
+        let ExaminePass {
+            params,
+            colliders,
+            bodies,
+            modified,
+            generations,
+            shape_queue,
+            shapes_mixed,
+            margins,
+        } = *pass;
+        let (mut refattened, mut fast, mut retyped) = (0, 0, false);
+        let mut delayed: [Option<(&RigidBody, RigidBodyType)>; BODY_TYPE_DELAY] =
+            [None; BODY_TYPE_DELAY];
+        let mut delay_at = 0;
+        let mut visited = 0;
+        for (w, &word) in modified.iter().enumerate() {
+            let mut word = word;
+            while word != 0 {
+                let bit = word.trailing_zeros();
+                word &= word - 1;
+                let index = w as u32 * 64 + bit;
+                if let Some(&shape) = shape_queue.get(visited + SHAPE_AHEAD) {
+                    prefetch(shape as *const u8);
+                }
+                visited += 1;
+                let handle = ColliderHandle::from_raw_parts(index, generations[index as usize]);
+                // The collision box's path is chosen once per update (`collision_aabb`).
+                let examined = if shapes_mixed {
+                    self.examine::<false>(params, colliders, bodies, handle, margins, events)
+                } else {
+                    self.examine::<true>(params, colliders, bodies, handle, margins, events)
+                };
+                if let Examined::Fast(check) = examined {
+                    // No branch on the body type, only an `|=`.
+                    if let Some((rb, filed)) = check {
+                        if !DELAY {
+                            retyped |= rb.body_type() != filed;
+                        } else {
+                            prefetch_l2(body_tail_address(rb));
+                            if let Some((due, filed)) = delayed[delay_at].replace((rb, filed)) {
+                                retyped |= due.body_type() != filed;
+                            }
+                            delay_at = (delay_at + 1) % BODY_TYPE_DELAY;
+                        }
+                    }
+                    fast += 1;
+                    if fast == REFATTEN_CHUNK {
+                        fast = 0;
+                        // The chunk's leavers, while their collider and body are cached.
+                        refattened = self
+                            .refatten_since(refattened, params, colliders, bodies, margins, events);
+                    }
+                }
+            }
+        }
+        self.refatten_since(refattened, params, colliders, bodies, margins, events);
+        for (due, filed) in delayed.iter().flatten() {
+            retyped |= due.body_type() != *filed;
+        }
+        retyped
+    }
+
+    /// Step 2, the fast path's last check, for updates where some collider's parent changed
+    /// body type (rare; the fast path only notes that one did): every modified collider
+    /// (`modified`, the bitmap of their indices, with their `generations`) whose proxy was
+    /// filed under another body type than its parent's gets the full examination.
+    #[allow(clippy::too_many_arguments)]
     fn check_body_types(
         &mut self,
         params: &IntegrationParameters,
         colliders: &ColliderSet,
         bodies: &RigidBodySet,
-        checks: &[(u32, &RigidBody)],
+        modified: &[u64],
+        generations: &[u32],
         margins: (f32, f32),
         events: &mut Vec<BroadPhasePairEvent>,
     ) {
-        for &(id, rb) in checks {
-            let Some(p) = &self.proxies[id as usize] else {
+        for index in SetBits::new(modified) {
+            let handle = ColliderHandle::from_raw_parts(index, generations[index as usize]);
+            let Some(rb) = colliders
+                .get(handle)
+                .and_then(|c| c.parent())
+                .and_then(|h| bodies.get(h))
+            else {
                 continue;
             };
-            if p.filter.body_type != rb.body_type() {
-                let handle = p.handle;
+            let retyped = self.proxies[index as usize]
+                .as_ref()
+                .is_some_and(|p| p.handle == handle && p.filter.body_type != rb.body_type());
+            if retyped {
                 self.examine_full(params, colliders, bodies, handle, margins, events);
             }
         }
@@ -1200,8 +1326,6 @@ impl BroadPhase for CanopyBroadPhase {
             self.leavers.resize(modified_colliders.len(), 0);
         }
         self.leaver_count = 0;
-        let mut refattened = 0;
-        let mut body_checks = Vec::with_capacity(BODY_CHECK_CHUNK);
         // The bitmap stays set until step 6 has read it. Where shapes are scattered over the
         // heap, the loop asks for the shape `SHAPE_AHEAD` colliders ahead (`shape_queue`: the
         // modified colliders' shape hints, in the loop's order).
@@ -1218,46 +1342,35 @@ impl BroadPhase for CanopyBroadPhase {
                 .extend(SetBits::new(&bits).map(|i| hints.get(i as usize).copied().unwrap_or(0)));
         }
         let shapes_mixed = self.shapes_mixed || !crate::shape_box::written_out_agrees();
-        let mut visited = 0;
-        for (w, &word) in bits.iter().enumerate() {
-            let mut word = word;
-            while word != 0 {
-                let bit = word.trailing_zeros();
-                word &= word - 1;
-                let index = w as u32 * 64 + bit;
-                if let Some(&shape) = shape_queue.get(visited + SHAPE_AHEAD) {
-                    prefetch(shape as *const u8);
-                }
-                visited += 1;
-                let handle = ColliderHandle::from_raw_parts(index, generations[index as usize]);
-                // The collision box's path is chosen once per update (`collision_aabb`).
-                let examined = if shapes_mixed {
-                    self.examine::<false>(params, colliders, bodies, handle, margins, events)
-                } else {
-                    self.examine::<true>(params, colliders, bodies, handle, margins, events)
-                };
-                if let Some(rb) = examined {
-                    prefetch_tail(rb);
-                    body_checks.push((index, rb));
-                    if body_checks.len() == BODY_CHECK_CHUNK {
-                        self.check_body_types(
-                            params,
-                            colliders,
-                            bodies,
-                            &body_checks,
-                            margins,
-                            events,
-                        );
-                        body_checks.clear();
-                        // The chunk's leavers too, while their collider and body are cached.
-                        refattened = self
-                            .refatten_since(refattened, params, colliders, bodies, margins, events);
-                    }
-                }
-            }
+        let pass = ExaminePass {
+            params,
+            colliders,
+            bodies,
+            modified: &bits,
+            generations: &generations,
+            shape_queue: &shape_queue,
+            shapes_mixed,
+            margins,
+        };
+        let body_bytes = bodies
+            .len()
+            .saturating_mul(std::mem::size_of::<RigidBody>());
+        let retyped = if body_bytes > DELAYED_BODY_BYTES || self.delay_body_types {
+            self.examine_all::<true>(&pass, events)
+        } else {
+            self.examine_all::<false>(&pass, events)
+        };
+        if retyped {
+            self.check_body_types(
+                params,
+                colliders,
+                bodies,
+                &bits,
+                &generations,
+                margins,
+                events,
+            );
         }
-        self.check_body_types(params, colliders, bodies, &body_checks, margins, events);
-        self.refatten_since(refattened, params, colliders, bodies, margins, events);
         self.shape_queue = shape_queue;
 
         lap!(self, clock, examine);
@@ -1423,6 +1536,69 @@ mod tests {
         }
         assert!(events > 0);
         assert!(virtual_call.shapes_look_mixed());
+    }
+
+    /// Body types compared at once and compared late (`BODY_TYPE_DELAY`, after a prefetch)
+    /// give the same events, update by update, on a churning scene, and both see body type
+    /// changes anywhere in an update: the first collider examined, one in the middle, and ones
+    /// among the last `BODY_TYPE_DELAY` (compared after the loop on the late path).
+    #[test]
+    fn body_types_compared_at_once_or_late_agree() {
+        let updates = record(spawn_storm(Size::Small), 40);
+        let (mut at_once, mut late) = (CanopyBroadPhase::new(), CanopyBroadPhase::new());
+        late.delay_body_types = true;
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for (k, u) in updates.iter().enumerate() {
+            a.clear();
+            b.clear();
+            u.apply(&mut at_once, &mut a);
+            u.apply(&mut late, &mut b);
+            assert_eq!(plain(&a), plain(&b), "update {k}");
+        }
+
+        // A row of fixed balls, each overlapping its neighbours (fixed-fixed pairs are
+        // filtered out); some become dynamic and must pair with their neighbours.
+        let mut bodies = RigidBodySet::new();
+        let mut colliders = ColliderSet::new();
+        let mut handles = Vec::new();
+        for i in 0..100 {
+            let b =
+                bodies.insert(RigidBodyBuilder::fixed().translation(vector![i as f32, 0.0, 0.0]));
+            colliders.insert_with_parent(ColliderBuilder::ball(0.6), b, &mut bodies);
+            handles.push(b);
+        }
+        let all: Vec<ColliderHandle> = colliders.iter().map(|(h, _)| h).collect();
+        let params = IntegrationParameters::default();
+        for delay in [false, true] {
+            let mut bp = CanopyBroadPhase::new();
+            bp.delay_body_types = delay;
+            let mut bodies = bodies.clone();
+            bp.update(&params, &colliders, &bodies, &all, &[], &mut Vec::new());
+            assert_eq!(bp.stats().pairs, 0);
+            // One change per update, so that no other change raises the update's flag.
+            let mut expected = Vec::new();
+            for i in [0u32, 50, 90, 97, 99] {
+                bodies[handles[i as usize]].set_body_type(RigidBodyType::Dynamic, true);
+                bp.update(&params, &colliders, &bodies, &all, &[], &mut Vec::new());
+                // With its one or two neighbours, once per pair (97 and 99 share 98).
+                for n in [i.wrapping_sub(1), i + 1].into_iter().filter(|&n| n < 100) {
+                    let pair = (i.min(n), i.max(n));
+                    if !expected.contains(&pair) {
+                        expected.push(pair);
+                    }
+                }
+                expected.sort_unstable();
+                let mut pairs: Vec<(u32, u32)> = bp
+                    .pairs()
+                    .map(|(x, y)| {
+                        let (x, y) = (x.into_raw_parts().0, y.into_raw_parts().0);
+                        (x.min(y), x.max(y))
+                    })
+                    .collect();
+                pairs.sort_unstable();
+                assert_eq!(pairs, expected, "delay {delay}, body {i}");
+            }
+        }
     }
 
     fn plain(events: &[BroadPhasePairEvent]) -> Vec<(bool, ColliderHandle, ColliderHandle)> {

@@ -390,9 +390,9 @@ proptest! {
 #[test]
 fn body_type_changes_are_seen_in_large_updates() {
     // Body type changes that only the bodies show (no collider moved), in updates that list
-    // more colliders than one chunk of the fast path's body-type checks (256): the checks of
-    // every chunk count, not only the last one's. A grid of fixed balls, each overlapping its
-    // four neighbours (fixed-fixed pairs are filtered), of which three become dynamic.
+    // more colliders than one chunk of the fast path's refattening (256): changes in every
+    // chunk count, not only the last one's. A grid of fixed balls, each overlapping its four
+    // neighbours (fixed-fixed pairs are filtered), of which three become dynamic.
     let mut bodies = RigidBodySet::new();
     let mut colliders = ColliderSet::new();
     let mut handles = Vec::new();
