@@ -74,19 +74,16 @@ fn main() {
             }))
         }
     };
+    // The configuration with the overrides, for `split` and `ab`.
+    let config = bp
+        .as_any()
+        .downcast_ref::<CanopyBroadPhase>()
+        .map_or_else(CanopyBroadPhaseConfig::default, |c| *c.config());
     if which == "split" {
-        let config = bp
-            .as_any()
-            .downcast_ref::<CanopyBroadPhase>()
-            .map_or_else(CanopyBroadPhaseConfig::default, |c| *c.config());
         split(name, config, first, rest);
         return;
     }
     if which == "ab" {
-        let config = match bp.as_any().downcast_ref::<CanopyBroadPhase>() {
-            Some(c) => *c.config(),
-            None => CanopyBroadPhaseConfig::default(),
-        };
         let mut a = CanopyBroadPhase::new();
         let mut b = CanopyBroadPhase::with_config(config).expect("validated above");
         let mut floor = AabbFloor::default();

@@ -279,9 +279,6 @@ pub struct CanopyBroadPhase {
     /// Compare body types late (`BODY_TYPE_DELAY`) whatever the bodies' size: for tests of
     /// that path on small worlds.
     delay_body_types: bool,
-    /// Colliders examined in this update whose loosening was negative or NaN
-    /// (`collision_aabb`).
-    negative_loosening: usize,
     /// Reused buffers: a bitmap of the modified handles' indices (all zero between updates;
     /// step 6 reads it) and their generations.
     scratch_order: (Vec<u64>, Vec<u32>),
@@ -450,7 +447,8 @@ impl CanopyBroadPhase {
     ///
     /// Where the loosening (contact skin plus half the prediction distance) is negative or NaN,
     /// which makes parry's loosening (and so Rapier's own broadphase) panic, the box is the
-    /// shape's box, not loosened, and `negative_loosening` counts the collider. That box is
+    /// shape's box, not loosened, and `negative_loosening` (the stats' count for this update)
+    /// counts the collider. That box is
     /// still a superset of the shape, so no pair the narrow phase could need is lost.
     #[inline(always)]
     fn collision_aabb(
@@ -582,7 +580,7 @@ impl CanopyBroadPhase {
                     collider,
                     parent,
                     WRITTEN_OUT,
-                    &mut self.negative_loosening,
+                    &mut self.stats.negative_loosening,
                 );
                 self.tights[id as usize] = tight;
                 // Whether the exact box left the fat box waits on the collider's memory: no
@@ -797,7 +795,7 @@ impl CanopyBroadPhase {
             collider,
             parent,
             crate::shape_box::written_out_agrees(),
-            &mut self.negative_loosening,
+            &mut self.stats.negative_loosening,
         );
         let filter = FilterData::new(collider, parent);
         let mobility = Mobility::of(filter.body_type);
@@ -1307,7 +1305,8 @@ impl BroadPhase for CanopyBroadPhase {
             (self.config.margin * params.length_unit).max(0.0),
             (self.config.fixed_margin * params.length_unit).max(0.0),
         );
-        self.negative_loosening = 0;
+        // Counted afresh by this update's examinations (`collision_aabb`).
+        self.stats.negative_loosening = 0;
         // In handle order (a bitmap of the modified indices, read back in order): the collider
         // arena and the proxies are then read front to back, which the hardware prefetcher
         // turns into streaming instead of one cache miss per collider.
@@ -1452,7 +1451,6 @@ impl BroadPhase for CanopyBroadPhase {
         self.stats.moved = moved.len();
         self.stats.deleted = deleted;
         self.stats.added = added;
-        self.stats.negative_loosening = self.negative_loosening;
         self.moved = moved;
         self.moved.clear();
         lap!(self, clock, finish);
