@@ -18,9 +18,10 @@
 //! update by update on fresh copies of the sets, taking turns, five times over; it takes each
 //! update's median time and sums them by kind of canopy update: none moved, few moved (one
 //! query per moved proxy), many moved (at least one proxy in eight: marked pair walks), and
-//! those with a tree rebuild. It shows where canopy's time goes against Rapier's, which the
-//! totals of `ab` and of the criterion bench hide (`spawn_storm`: the updates where the first
-//! layers fall together cost canopy more than Rapier).
+//! those with a tree rebuild; and again by which of the step's two calls it is (the user's
+//! changes, or the positions after the integration). It shows where canopy's time goes against
+//! Rapier's, which the totals of `ab` and of the criterion bench hide (`spawn_storm`: the
+//! updates where the first layers fall together cost canopy more than Rapier).
 
 use canopy::rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig};
 use canopy::scenes::harness::{record, replay, AabbFloor, RecordedUpdate};
@@ -201,7 +202,11 @@ fn split(
             .collect()
     });
     const KINDS: [&str; 4] = ["none moved", "few moved", "many moved", "tree rebuilt"];
+    const CALLS: [&str; 2] = ["user changes", "integrated"];
     let mut sums = [(0usize, 0.0f64, 0.0f64); 4];
+    // By which of the step's two calls it is: the recording's update `i + 1`, whose call within
+    // its step is `(i + 1) % 2` (0: the user's changes, 1: after the integration).
+    let mut by_call = [(0usize, 0.0f64, 0.0f64); 2];
     for i in 0..rest.len() {
         let median = |k: fn(&(f64, f64, usize)) -> f64| {
             let mut v: Vec<f64> = runs.iter().map(|r| k(&r[i])).collect();
@@ -210,14 +215,18 @@ fn split(
         };
         let (r, c) = (median(|x| x.0), median(|x| x.1));
         // The kind is the same in every repetition (the updates are deterministic).
-        let s = &mut sums[runs[0][i].2];
-        s.0 += 1;
-        s.1 += r;
-        s.2 += c;
+        for s in [&mut sums[runs[0][i].2], &mut by_call[(i + 1) % 2]] {
+            s.0 += 1;
+            s.1 += r;
+            s.2 += c;
+        }
     }
     let (rapier, canopy) = sums.iter().fold((0.0, 0.0), |a, s| (a.0 + s.1, a.1 + s.2));
     println!("{name}: medians of {REPS} runs, {} updates", rest.len());
-    for (kind, s) in KINDS.iter().zip(&sums) {
+    for (kind, s) in KINDS.iter().zip(&sums).chain(CALLS.iter().zip(&by_call)) {
+        if kind == &CALLS[0] {
+            println!("  by call:");
+        }
         if s.0 > 0 {
             println!(
                 "  {kind:>12}: {:4} updates, rapier {:8.2} ms, canopy {:8.2} ms ({:4.1}% of canopy's), ratio {:5.2}",
