@@ -223,13 +223,10 @@ fn split(
     }
     let (rapier, canopy) = sums.iter().fold((0.0, 0.0), |a, s| (a.0 + s.1, a.1 + s.2));
     println!("{name}: medians of {REPS} runs, {} updates", rest.len());
-    for (kind, s) in KINDS.iter().zip(&sums).chain(CALLS.iter().zip(&by_call)) {
-        if kind == &CALLS[0] {
-            println!("  by call:");
-        }
-        if s.0 > 0 {
+    let rows = |labels: &[&str], sums: &[(usize, f64, f64)]| {
+        for (label, s) in labels.iter().zip(sums).filter(|(_, s)| s.0 > 0) {
             println!(
-                "  {kind:>12}: {:4} updates, rapier {:8.2} ms, canopy {:8.2} ms ({:4.1}% of canopy's), ratio {:5.2}",
+                "  {label:>12}: {:4} updates, rapier {:8.2} ms, canopy {:8.2} ms ({:4.1}% of canopy's), ratio {:5.2}",
                 s.0,
                 s.1 * 1e3,
                 s.2 * 1e3,
@@ -237,7 +234,10 @@ fn split(
                 s.1 / s.2
             );
         }
-    }
+    };
+    rows(&KINDS, &sums);
+    println!("  by call:");
+    rows(&CALLS, &by_call);
     println!(
         "  {:>12}: rapier {:8.2} ms, canopy {:8.2} ms, ratio {:5.2}",
         "all",
