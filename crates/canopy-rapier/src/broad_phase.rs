@@ -31,15 +31,17 @@ use crate::pair_set::{unkey, PairSet};
 use crate::proxy::{Loc, Proxy};
 use crate::proxy_tree::{ProxyTree, DEAD};
 use crate::queries::{QueryMirror, QueryOverlay};
+use crate::shape_box::Written;
 use crate::stats::BroadPhaseStats;
 use canopy_core::{Aabb, PairMarks};
 use rapier3d::prelude::*;
 
 /// The examine loop gives the proxies whose exact box left their fat box their new one
-/// (`refatten`) every this many colliders of the fast path, while their collider and body
-/// are still cached (`many_kinematics`, where one proxy in fifteen leaves: about 10% of the
-/// update, against refattening after the loop).
-const REFATTEN_CHUNK: usize = 256;
+/// (`refatten`) every this many words of the modified colliders' bitmap (256 indices), while
+/// their collider and body are still cached (`many_kinematics`, where one proxy in fifteen
+/// leaves: about 10% of the update, against refattening after the loop). Counted in words,
+/// not colliders: no counter in the loop.
+const REFATTEN_WORDS: usize = 4;
 
 /// The address of the last byte of `rb`: Rapier's `RigidBody` keeps its one-byte fields (body
 /// type, dominance, enabled) at its end, on another line than the fields the collision box
@@ -575,19 +577,53 @@ impl CanopyBroadPhase {
                 && p.is_valid()
                 && p.filter.same_as_but_body_type(collider, parent.is_some())
             {
-                let tight = Self::collision_aabb(
-                    params,
-                    collider,
-                    parent,
-                    WRITTEN_OUT,
-                    &mut self.stats.negative_loosening,
-                );
-                self.tights[id as usize] = tight;
                 // Whether the exact box left the fat box waits on the collider's memory: no
                 // branch on it here (a misprediction would stall the loop until that load
                 // arrives). The id is written either way and kept only when it left; those
                 // get their new fat box after the loop (`refatten`).
-                let left = !p.fat.contains_branchless(&tight);
+                let left = if WRITTEN_OUT {
+                    let tight = &mut self.tights[id as usize];
+                    let soft_ccd = parent.is_some_and(|rb| rb.soft_ccd_prediction() > 0.0);
+                    let written = if soft_ccd {
+                        Written::Unwritten
+                    } else {
+                        let prediction = params.prediction_distance() / 2.0;
+                        crate::shape_box::written_box(collider, prediction)
+                    };
+                    match written {
+                        // A ball's or cuboid's box, stored and tested straight from registers.
+                        Written::Lanes(lanes) => {
+                            lanes.write(tight);
+                            !lanes.inside(&p.fat)
+                        }
+                        Written::Capsule(b) => {
+                            *tight = Aabb::new(b.mins, b.maxs);
+                            !p.fat.contains_branchless(tight)
+                        }
+                        // With soft CCD, or a box `written_box` does not give (having seen the
+                        // shape already, parry's path then).
+                        Written::Unwritten => {
+                            *tight = Self::collision_aabb(
+                                params,
+                                collider,
+                                parent,
+                                soft_ccd,
+                                &mut self.stats.negative_loosening,
+                            );
+                            !p.fat.contains_branchless(tight)
+                        }
+                    }
+                } else {
+                    let tight = Self::collision_aabb(
+                        params,
+                        collider,
+                        parent,
+                        false,
+                        &mut self.stats.negative_loosening,
+                    );
+                    self.tights[id as usize] = tight;
+                    !p.fat.contains_branchless(&tight)
+                };
                 if let Some(slot) = self.leavers.get_mut(self.leaver_count) {
                     *slot = id;
                     self.leaver_count += left as usize;
@@ -623,49 +659,46 @@ impl CanopyBroadPhase {
             shapes_mixed,
             margins,
         } = *pass;
-        let (mut refattened, mut fast, mut retyped) = (0, 0, false);
+        let (mut refattened, mut retyped) = (0, false);
         let mut delayed: [Option<(&RigidBody, RigidBodyType)>; BODY_TYPE_DELAY] =
             [None; BODY_TYPE_DELAY];
         let mut delay_at = 0;
-        let mut visited = 0;
+        let mut shapes_ahead = shape_queue.get(SHAPE_AHEAD..).unwrap_or_default().iter();
+        // One generation per bit of `modified` (so no index below is out of bounds).
+        let generations = &generations[..modified.len() * 64];
         for (w, &word) in modified.iter().enumerate() {
             let mut word = word;
             while word != 0 {
-                let bit = word.trailing_zeros();
+                let bit = word.trailing_zeros() as usize;
                 word &= word - 1;
-                let index = w as u32 * 64 + bit;
-                if let Some(&shape) = shape_queue.get(visited + SHAPE_AHEAD) {
+                let index = w * 64 + bit;
+                if let Some(&shape) = shapes_ahead.next() {
                     prefetch(shape as *const u8);
                 }
-                visited += 1;
-                let handle = ColliderHandle::from_raw_parts(index, generations[index as usize]);
+                let handle = ColliderHandle::from_raw_parts(index as u32, generations[index]);
                 // The collision box's path is chosen once per update (`collision_aabb`).
                 let examined = if shapes_mixed {
                     self.examine::<false>(params, colliders, bodies, handle, margins, events)
                 } else {
                     self.examine::<true>(params, colliders, bodies, handle, margins, events)
                 };
-                if let Examined::Fast(check) = examined {
+                if let Examined::Fast(Some((rb, filed))) = examined {
                     // No branch on the body type, only an `|=`.
-                    if let Some((rb, filed)) = check {
-                        if !DELAY {
-                            retyped |= rb.body_type() != filed;
-                        } else {
-                            prefetch_l2(body_tail_address(rb));
-                            if let Some((due, filed)) = delayed[delay_at].replace((rb, filed)) {
-                                retyped |= due.body_type() != filed;
-                            }
-                            delay_at = (delay_at + 1) % BODY_TYPE_DELAY;
+                    if !DELAY {
+                        retyped |= rb.body_type() != filed;
+                    } else {
+                        prefetch_l2(body_tail_address(rb));
+                        if let Some((due, filed)) = delayed[delay_at].replace((rb, filed)) {
+                            retyped |= due.body_type() != filed;
                         }
-                    }
-                    fast += 1;
-                    if fast == REFATTEN_CHUNK {
-                        fast = 0;
-                        // The chunk's leavers, while their collider and body are cached.
-                        refattened = self
-                            .refatten_since(refattened, params, colliders, bodies, margins, events);
+                        delay_at = (delay_at + 1) % BODY_TYPE_DELAY;
                     }
                 }
+            }
+            if (w + 1) % REFATTEN_WORDS == 0 {
+                // The chunk's leavers, while their collider and body are cached.
+                refattened =
+                    self.refatten_since(refattened, params, colliders, bodies, margins, events);
             }
         }
         self.refatten_since(refattened, params, colliders, bodies, margins, events);
@@ -1314,12 +1347,19 @@ impl BroadPhase for CanopyBroadPhase {
         for h in modified_colliders {
             let (index, generation) = h.into_raw_parts();
             let (word, index) = ((index / 64) as usize, index as usize);
-            if word >= bits.len() {
-                bits.resize(word + 1, 0u64);
-                generations.resize(bits.len() * 64, 0);
+            // `generations` has 64 entries per word of `bits`: one check covers both.
+            let slot = match generations.get_mut(index) {
+                Some(slot) => slot,
+                None => {
+                    bits.resize(word + 1, 0u64);
+                    generations.resize(bits.len() * 64, 0);
+                    &mut generations[index]
+                }
+            };
+            *slot = generation;
+            if let Some(w) = bits.get_mut(word) {
+                *w |= 1 << (index % 64);
             }
-            bits[word] |= 1 << (index % 64);
-            generations[index] = generation;
         }
         if self.leavers.len() < modified_colliders.len() {
             self.leavers.resize(modified_colliders.len(), 0);

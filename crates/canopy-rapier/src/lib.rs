@@ -12,6 +12,7 @@
 
 #![deny(missing_docs)]
 
+mod box_lanes;
 mod broad_phase;
 mod config;
 mod filter;

@@ -6,11 +6,13 @@
 //! to matrix, absolute value, matrix times vector as nalgebra's `gemv` sums it, the quaternion
 //! rotation of a point, simba's `simd_min`/`simd_max` for the capsule's corners, then the
 //! loosening), which the tests check against `compute_collision_aabb` on random shapes and
-//! poses. Other shapes go through parry. A build whose parry or nalgebra computes these boxes
+//! poses. Balls' and cuboids' boxes come as `BoxLanes`, which the examine loop stores and tests
+//! without taking them apart. Other shapes go through parry. A build whose parry or nalgebra computes these boxes
 //! otherwise (another release) is caught at run time too: `written_out_agrees` compares both on
 //! a fixed set of shapes and poses once per process, and the broadphase keeps to parry's path
 //! when they differ.
 
+use crate::box_lanes::BoxLanes;
 use rapier3d::geometry::{Collider, ColliderBuilder};
 use rapier3d::math::{Isometry, Point, Real, Translation, Vector};
 use rapier3d::na::{Quaternion, UnitQuaternion};
@@ -21,21 +23,49 @@ use std::sync::OnceLock;
 /// `collider.compute_collision_aabb(prediction)`, bit for bit.
 #[inline(always)]
 pub(crate) fn collision_box(collider: &Collider, prediction: Real) -> ParryAabb {
+    match written_box(collider, prediction) {
+        Written::Lanes(lanes) => {
+            let a = lanes.to_aabb();
+            ParryAabb::new(a.min, a.max)
+        }
+        Written::Capsule(b) => b,
+        Written::Unwritten => collider.compute_collision_aabb(prediction),
+    }
+}
+
+/// A collision box from `written_box`.
+pub(crate) enum Written {
+    /// A ball's or a cuboid's, still in vector registers.
+    Lanes(BoxLanes),
+    /// A capsule's.
+    Capsule(ParryAabb),
+    /// Not written out here: another shape, or a negative or NaN loosening (which parry
+    /// refuses).
+    Unwritten,
+}
+
+/// `collider.compute_collision_aabb(prediction)`, bit for bit, for the shapes written out
+/// here: balls and cuboids as `BoxLanes` (stored and tested against the fat box without
+/// leaving vector registers), capsules as a box.
+#[inline(always)]
+pub(crate) fn written_box(collider: &Collider, prediction: Real) -> Written {
+    // The shape first: the amount computed after the (virtual) call stays in a register.
+    let shape = collider.shape().as_typed_shape();
     let amount = collider.contact_skin() + prediction;
     if amount.is_nan() || amount < 0.0 {
-        // Parry's loosening refuses a negative (or NaN) amount; its own path says so.
-        return collider.compute_collision_aabb(prediction);
+        return Written::Unwritten;
     }
     let pos = collider.position();
-    let (mins, maxs) = match collider.shape().as_typed_shape() {
+    let (mins, maxs) = match shape {
         TypedShape::Ball(b) => {
             let c = pos.translation.vector;
-            (c.map(|x| x + -b.radius), c.map(|x| x + b.radius))
+            let r = b.radius;
+            return Written::Lanes(BoxLanes::around([c.x, c.y, c.z], [r, r, r], amount));
         }
         TypedShape::Cuboid(c) => {
             let t = pos.translation.vector;
             let h = abs_rotated(pos, &c.half_extents);
-            (t - h, t + h)
+            return Written::Lanes(BoxLanes::around([t.x, t.y, t.z], [h.x, h.y, h.z], amount));
         }
         TypedShape::Capsule(c) => {
             let a = transform_point(pos, &c.segment.a);
@@ -51,13 +81,13 @@ pub(crate) fn collision_box(collider: &Collider, prediction: Real) -> ParryAabb 
                 Vector::new(max(a.x, b.x), max(a.y, b.y), max(a.z, b.z)).map(|x| x + r),
             )
         }
-        _ => return collider.compute_collision_aabb(prediction),
+        _ => return Written::Unwritten,
     };
     // `Aabb::loosened`.
-    ParryAabb::new(
+    Written::Capsule(ParryAabb::new(
         Point::from(mins.map(|x| x + -amount)),
         Point::from(maxs.map(|x| x + amount)),
-    )
+    ))
 }
 
 /// Whether `collision_box` gives parry's boxes, bit for bit, on balls, cuboids and capsules in

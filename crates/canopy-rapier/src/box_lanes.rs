@@ -1,0 +1,247 @@
+//! `BoxLanes`: a box's six floats as two overlapping four-lane vectors, the way the examine
+//! loop computes a collider's exact box, stores it and tests it against the fat box without
+//! moving single floats between registers: `lo` holds `min.x, min.y, min.z, max.x` (the box's
+//! floats 0..4) and `hi` holds `min.z, max.x, max.y, max.z` (floats 2..6). SSE on x86_64 (always
+//! there), plain arrays elsewhere; both compute every coordinate with the same floating-point
+//! operations as parry does, so the boxes are the same to the bit (a NaN stays a NaN; its sign
+//! and payload are not kept by the compiler anyway).
+
+use canopy_core::Aabb;
+
+/// A box as two overlapping windows of its six floats (see the module comment).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct BoxLanes {
+    lo: imp::V,
+    hi: imp::V,
+}
+
+/// In the lanes of `lo`, then of `hi`: whether the lane is a lower corner's coordinate.
+const LO_LOWER: [bool; 4] = [true, true, true, false];
+const HI_LOWER: [bool; 4] = [true, false, false, false];
+
+impl BoxLanes {
+    /// The box with lower corner `(c - h) - pad` and upper corner `(c + h) + pad` on each
+    /// axis: parry's box of a ball or cuboid, then its `loosened(pad)`.
+    #[inline(always)]
+    pub(crate) fn around(c: [f32; 3], h: [f32; 3], pad: f32) -> Self {
+        let [x, y, z] = c;
+        let [hx, hy, hz] = h;
+        let lo = imp::around([x, y, z, x], [hx, hy, hz, hx], pad, LO_LOWER);
+        let hi = imp::around([z, x, y, z], [hz, hx, hy, hz], pad, HI_LOWER);
+        Self { lo, hi }
+    }
+
+    /// The box as an [`Aabb`].
+    #[inline(always)]
+    pub(crate) fn to_aabb(self) -> Aabb {
+        let mut out = Aabb::EMPTY;
+        self.write(&mut out);
+        out
+    }
+
+    /// Stores the box into `out`.
+    #[inline(always)]
+    pub(crate) fn write(self, out: &mut Aabb) {
+        imp::write(self.lo, self.hi, out);
+    }
+
+    /// `true` when the box lies inside the closed box `outer` (every comparison `<=`; a NaN
+    /// on either side fails it): `outer.contains(&self.to_aabb())`.
+    #[inline(always)]
+    pub(crate) fn inside(self, outer: &Aabb) -> bool {
+        imp::inside(self.lo, self.hi, outer)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+use sse as imp;
+
+#[cfg(not(target_arch = "x86_64"))]
+use portable as imp;
+
+#[cfg(target_arch = "x86_64")]
+mod sse {
+    use canopy_core::Aabb;
+    use std::arch::x86_64::*;
+
+    pub(crate) type V = __m128;
+
+    const _: () = assert!(std::mem::size_of::<Aabb>() == 24);
+
+    /// Per lane: `(c - h) - pad` where `lower`, else `(c + h) + pad` (a subtraction as the
+    /// addition of the negated operand: the same number).
+    #[inline(always)]
+    pub(crate) fn around(c: [f32; 4], h: [f32; 4], pad: f32, lower: [bool; 4]) -> V {
+        let all = |l: bool| if l { -1 } else { 0 };
+        // SAFETY: SSE2 is part of the x86_64 baseline; no memory is touched.
+        unsafe {
+            let mask = _mm_castsi128_ps(_mm_setr_epi32(
+                all(lower[0]),
+                all(lower[1]),
+                all(lower[2]),
+                all(lower[3]),
+            ));
+            // The sign bit in the lower lanes: a xor with it negates them exactly.
+            let sign = _mm_and_ps(mask, _mm_set1_ps(-0.0));
+            let c = _mm_setr_ps(c[0], c[1], c[2], c[3]);
+            let h = _mm_setr_ps(h[0], h[1], h[2], h[3]);
+            let corner = _mm_add_ps(c, _mm_xor_ps(h, sign));
+            _mm_add_ps(corner, _mm_xor_ps(_mm_set1_ps(pad), sign))
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn write(lo: V, hi: V, out: &mut Aabb) {
+        let p = (out as *mut Aabb).cast::<f32>();
+        // SAFETY: `Aabb` is `repr(C)`, six `f32` (`min` then `max`; 24 bytes, asserted above):
+        // floats 0..4 and 2..6 both lie within it; unaligned stores.
+        unsafe {
+            _mm_storeu_ps(p, lo);
+            _mm_storeu_ps(p.add(2), hi);
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn inside(lo: V, hi: V, outer: &Aabb) -> bool {
+        let p = (outer as *const Aabb).cast::<f32>();
+        // SAFETY: as in `write`, two unaligned loads within the box's 24 bytes.
+        unsafe {
+            let (outer_lo, outer_hi) = (_mm_loadu_ps(p), _mm_loadu_ps(p.add(2)));
+            // outer.min <= min (lanes 0..3 of `lo`), max <= outer.max (lanes 1..4 of `hi`).
+            let low = _mm_movemask_ps(_mm_cmple_ps(outer_lo, lo));
+            let high = _mm_movemask_ps(_mm_cmple_ps(hi, outer_hi));
+            // Lane 3 of `low` and lane 0 of `high` are not part of the test.
+            (low | 0b1000) & (high | 0b0001) == 0b1111
+        }
+    }
+}
+
+/// The same operations on plain arrays (built everywhere for the tests, which check that both
+/// agree).
+#[cfg(any(test, not(target_arch = "x86_64")))]
+mod portable {
+    use canopy_core::Aabb;
+
+    pub(crate) type V = [f32; 4];
+
+    #[inline(always)]
+    pub(crate) fn around(c: [f32; 4], h: [f32; 4], pad: f32, lower: [bool; 4]) -> V {
+        std::array::from_fn(|i| {
+            if lower[i] {
+                (c[i] - h[i]) - pad
+            } else {
+                (c[i] + h[i]) + pad
+            }
+        })
+    }
+
+    #[inline(always)]
+    pub(crate) fn write(lo: V, hi: V, out: &mut Aabb) {
+        out.min = [lo[0], lo[1], lo[2]].into();
+        out.max = [hi[1], hi[2], hi[3]].into();
+    }
+
+    #[inline(always)]
+    pub(crate) fn inside(lo: V, hi: V, outer: &Aabb) -> bool {
+        (outer.min.x <= lo[0])
+            & (outer.min.y <= lo[1])
+            & (outer.min.z <= lo[2])
+            & (hi[1] <= outer.max.x)
+            & (hi[2] <= outer.max.y)
+            & (hi[3] <= outer.max.z)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn coord() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            -10.0f32..10.0,
+            -1.0e30f32..1.0e30,
+            Just(0.0f32),
+            Just(-0.0f32),
+            Just(f32::NAN),
+            Just(-f32::NAN),
+            Just(f32::INFINITY),
+            Just(f32::NEG_INFINITY),
+        ]
+    }
+
+    /// The box's bits, every NaN as one NaN (the compiler keeps no NaN's sign or payload).
+    fn bits(a: &Aabb) -> [u32; 6] {
+        [a.min.x, a.min.y, a.min.z, a.max.x, a.max.y, a.max.z]
+            .map(|x| if x.is_nan() { f32::NAN } else { x }.to_bits())
+    }
+
+    /// The box of `around`, coordinate by coordinate.
+    fn expected(c: [f32; 3], h: [f32; 3], pad: f32) -> Aabb {
+        Aabb::from_arrays(
+            [0, 1, 2].map(|i| (c[i] - h[i]) - pad),
+            [0, 1, 2].map(|i| (c[i] + h[i]) + pad),
+        )
+    }
+
+    /// The lanes of `a` as they are (not computed).
+    fn lanes_of(a: &Aabb) -> ([f32; 4], [f32; 4]) {
+        (
+            [a.min.x, a.min.y, a.min.z, a.max.x],
+            [a.min.z, a.max.x, a.max.y, a.max.z],
+        )
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(3000))]
+        /// `around` (through `write` and `to_aabb`) gives `(c - h) - pad` and `(c + h) + pad`
+        /// to the bit, on both implementations.
+        #[test]
+        fn around_is_the_loosened_box(
+            c in prop::array::uniform3(coord()),
+            h in prop::array::uniform3(coord()),
+            pad in coord(),
+        ) {
+            let want = bits(&expected(c, h, pad));
+            let lanes = BoxLanes::around(c, h, pad);
+            let mut out = Aabb::from_arrays([1.0; 3], [2.0; 3]);
+            lanes.write(&mut out);
+            prop_assert_eq!(bits(&out), want);
+            prop_assert_eq!(bits(&lanes.to_aabb()), want);
+            let [x, y, z] = c;
+            let [hx, hy, hz] = h;
+            let lo = portable::around([x, y, z, x], [hx, hy, hz, hx], pad, LO_LOWER);
+            let hi = portable::around([z, x, y, z], [hz, hx, hy, hz], pad, HI_LOWER);
+            let mut out = Aabb::EMPTY;
+            portable::write(lo, hi, &mut out);
+            prop_assert_eq!(bits(&out), want);
+        }
+
+        /// The portable `inside` is `Aabb::contains`, NaNs included.
+        #[test]
+        fn inside_is_contains(
+            inner in (prop::array::uniform3(coord()), prop::array::uniform3(coord())),
+            outer in (prop::array::uniform3(coord()), prop::array::uniform3(coord())),
+        ) {
+            let (inner, outer) = (
+                Aabb::from_arrays(inner.0, inner.1),
+                Aabb::from_arrays(outer.0, outer.1),
+            );
+            let (lo, hi) = lanes_of(&inner);
+            prop_assert_eq!(portable::inside(lo, hi, &outer), outer.contains(&inner));
+        }
+
+        /// `inside` (SSE on x86_64) is `Aabb::contains` of the stored box, NaNs included.
+        #[test]
+        fn inside_of_computed_boxes_is_contains(
+            c in prop::array::uniform3(coord()),
+            h in prop::array::uniform3(coord()),
+            pad in coord(),
+            outer in (prop::array::uniform3(coord()), prop::array::uniform3(coord())),
+        ) {
+            let outer = Aabb::from_arrays(outer.0, outer.1);
+            let lanes = BoxLanes::around(c, h, pad);
+            prop_assert_eq!(lanes.inside(&outer), outer.contains(&lanes.to_aabb()));
+        }
+    }
+}
