@@ -31,6 +31,32 @@ impl BoxLanes {
         Self { lo, hi }
     }
 
+    /// The lanes of a stored box.
+    #[inline(always)]
+    pub(crate) fn load(a: &Aabb) -> Self {
+        let (lo, hi) = imp::load(a);
+        Self { lo, hi }
+    }
+
+    /// The box enlarged by `margin` on every side (`Aabb::loosened`), then stretched by `d`:
+    /// each finite coordinate of `d` moves the lower side when negative, the upper side
+    /// otherwise; a NaN or infinite one is left out. (The fat box of a proxy: `d` is the
+    /// body's motion over the velocity stretch.)
+    #[inline(always)]
+    pub(crate) fn fattened(self, margin: f32, d: [f32; 3]) -> Self {
+        let [x, y, z] = d;
+        Self {
+            lo: imp::fatten(self.lo, margin, [x, y, z, x], LO_LOWER),
+            hi: imp::fatten(self.hi, margin, [z, x, y, z], HI_LOWER),
+        }
+    }
+
+    /// `Aabb::is_valid`: every coordinate finite and `min <= max` on every axis.
+    #[inline(always)]
+    pub(crate) fn is_valid(self) -> bool {
+        imp::is_valid(self.lo, self.hi)
+    }
+
     /// The box as an [`Aabb`].
     #[inline(always)]
     pub(crate) fn to_aabb(self) -> Aabb {
@@ -72,15 +98,9 @@ mod sse {
     /// addition of the negated operand: the same number).
     #[inline(always)]
     pub(crate) fn around(c: [f32; 4], h: [f32; 4], pad: f32, lower: [bool; 4]) -> V {
-        let all = |l: bool| if l { -1 } else { 0 };
+        let mask = lane_mask(lower);
         // SAFETY: SSE2 is part of the x86_64 baseline; no memory is touched.
         unsafe {
-            let mask = _mm_castsi128_ps(_mm_setr_epi32(
-                all(lower[0]),
-                all(lower[1]),
-                all(lower[2]),
-                all(lower[3]),
-            ));
             // The sign bit in the lower lanes: a xor with it negates them exactly.
             let sign = _mm_and_ps(mask, _mm_set1_ps(-0.0));
             let c = _mm_setr_ps(c[0], c[1], c[2], c[3]);
@@ -88,6 +108,66 @@ mod sse {
             let corner = _mm_add_ps(c, _mm_xor_ps(h, sign));
             _mm_add_ps(corner, _mm_xor_ps(_mm_set1_ps(pad), sign))
         }
+    }
+
+    /// All bits set in the lanes that are `true`.
+    #[inline(always)]
+    fn lane_mask(lanes: [bool; 4]) -> V {
+        let all = |l: bool| if l { -1 } else { 0 };
+        // SAFETY: SSE2 is part of the x86_64 baseline; no memory is touched.
+        unsafe {
+            _mm_castsi128_ps(_mm_setr_epi32(
+                all(lanes[0]),
+                all(lanes[1]),
+                all(lanes[2]),
+                all(lanes[3]),
+            ))
+        }
+    }
+
+    /// Per lane: `v - margin` where `lower`, else `v + margin`; then plus `d` where `d` is
+    /// finite and negative (`lower` lanes) or finite and not negative (the others).
+    #[inline(always)]
+    pub(crate) fn fatten(v: V, margin: f32, d: [f32; 4], lower: [bool; 4]) -> V {
+        let lower = lane_mask(lower);
+        // SAFETY: SSE2 is part of the x86_64 baseline; no memory is touched.
+        unsafe {
+            let sign = _mm_and_ps(lower, _mm_set1_ps(-0.0));
+            let v = _mm_add_ps(v, _mm_xor_ps(_mm_set1_ps(margin), sign));
+            let d = _mm_setr_ps(d[0], d[1], d[2], d[3]);
+            let finite = _mm_cmple_ps(_mm_andnot_ps(_mm_set1_ps(-0.0), d), _mm_set1_ps(f32::MAX));
+            let negative = _mm_cmplt_ps(d, _mm_setzero_ps());
+            // Lower lanes take the negative coordinates, the others the rest.
+            let take = _mm_and_ps(
+                finite,
+                _mm_xor_ps(
+                    negative,
+                    _mm_xor_ps(lower, _mm_castsi128_ps(_mm_set1_epi32(-1))),
+                ),
+            );
+            _mm_add_ps(v, _mm_and_ps(d, take))
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn is_valid(lo: V, hi: V) -> bool {
+        // SAFETY: SSE2 is part of the x86_64 baseline; no memory is touched.
+        unsafe {
+            let big = _mm_set1_ps(f32::MAX);
+            let abs = |v: V| _mm_andnot_ps(_mm_set1_ps(-0.0), v);
+            let finite = _mm_and_ps(_mm_cmple_ps(abs(lo), big), _mm_cmple_ps(abs(hi), big));
+            // min.x, y, z (lanes 0..3 of `lo`) against max.x, y, z (lanes 1..4 of `hi`).
+            let max = _mm_shuffle_ps::<0b11_11_10_01>(hi, hi);
+            let ordered = _mm_movemask_ps(_mm_cmple_ps(lo, max));
+            _mm_movemask_ps(finite) == 0b1111 && ordered & 0b0111 == 0b0111
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn load(a: &Aabb) -> (V, V) {
+        let p = (a as *const Aabb).cast::<f32>();
+        // SAFETY: as in `write`, two unaligned loads within the box's 24 bytes.
+        unsafe { (_mm_loadu_ps(p), _mm_loadu_ps(p.add(2))) }
     }
 
     #[inline(always)]
@@ -133,6 +213,35 @@ mod portable {
                 (c[i] + h[i]) + pad
             }
         })
+    }
+
+    #[inline(always)]
+    pub(crate) fn fatten(v: V, margin: f32, d: [f32; 4], lower: [bool; 4]) -> V {
+        std::array::from_fn(|i| {
+            let v = if lower[i] {
+                v[i] - margin
+            } else {
+                v[i] + margin
+            };
+            let take = d[i].is_finite() && (d[i] < 0.0) == lower[i];
+            v + if take { d[i] } else { 0.0 }
+        })
+    }
+
+    #[inline(always)]
+    pub(crate) fn is_valid(lo: V, hi: V) -> bool {
+        lo.iter().chain(&hi).all(|x| x.is_finite())
+            && (lo[0] <= hi[1])
+            && (lo[1] <= hi[2])
+            && (lo[2] <= hi[3])
+    }
+
+    #[inline(always)]
+    pub(crate) fn load(a: &Aabb) -> (V, V) {
+        (
+            [a.min.x, a.min.y, a.min.z, a.max.x],
+            [a.min.z, a.max.x, a.max.y, a.max.z],
+        )
     }
 
     #[inline(always)]
@@ -229,6 +338,43 @@ mod tests {
             );
             let (lo, hi) = lanes_of(&inner);
             prop_assert_eq!(portable::inside(lo, hi, &outer), outer.contains(&inner));
+        }
+
+        /// `fattened` is `loosened(margin)`, then each finite coordinate of the stretch on the
+        /// lower side when negative, else the upper side, and `is_valid` is `Aabb::is_valid`:
+        /// on both implementations, through `load` and `write`.
+        #[test]
+        fn fattened_is_loosened_then_stretched(
+            tight in (prop::array::uniform3(coord()), prop::array::uniform3(coord())),
+            margin in coord(),
+            d in prop::array::uniform3(coord()),
+        ) {
+            let tight = Aabb::from_arrays(tight.0, tight.1);
+            let mut want = tight.loosened(margin);
+            for (i, &d) in d.iter().enumerate() {
+                if d.is_finite() {
+                    if d < 0.0 {
+                        want.min[i] += d;
+                    } else {
+                        want.max[i] += d;
+                    }
+                }
+            }
+            // Lanes left unstretched get `+ 0.0`, which turns a -0.0 into 0.0: the same number.
+            let same = |a: &Aabb| bits(a).map(|b| if b == (-0.0f32).to_bits() { 0 } else { b });
+            let fat = BoxLanes::load(&tight).fattened(margin, d);
+            prop_assert_eq!(same(&fat.to_aabb()), same(&want));
+            prop_assert_eq!(fat.is_valid(), want.is_valid());
+            let (lo, hi) = portable::load(&tight);
+            let [x, y, z] = d;
+            let (lo, hi) = (
+                portable::fatten(lo, margin, [x, y, z, x], LO_LOWER),
+                portable::fatten(hi, margin, [z, x, y, z], HI_LOWER),
+            );
+            let mut out = Aabb::EMPTY;
+            portable::write(lo, hi, &mut out);
+            prop_assert_eq!(same(&out), same(&want));
+            prop_assert_eq!(portable::is_valid(lo, hi), want.is_valid());
         }
 
         /// `inside` (SSE on x86_64) is `Aabb::contains` of the stored box, NaNs included.

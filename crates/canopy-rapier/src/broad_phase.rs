@@ -25,6 +25,7 @@
 //! 6. Liveness: every collider Rapier reported checks its candidates that are not live yet;
 //!    those whose exact boxes now overlap become live (`AddPair`).
 
+use crate::box_lanes::BoxLanes;
 use crate::config::{CanopyBroadPhaseConfig, ConfigError};
 use crate::filter::{FilterData, Mobility};
 use crate::pair_set::{unkey, PairSet};
@@ -171,9 +172,14 @@ struct ExaminePass<'a> {
 
 /// What step 2 did with one collider.
 enum Examined<'b> {
-    /// The fast path; with a parent, the parent and the body type the proxy was filed under,
-    /// still to compare (`BODY_TYPE_DELAY`).
-    Fast(Option<(&'b RigidBody, RigidBodyType)>),
+    /// The fast path: the parent (if any) and the body type the proxy was filed under, still
+    /// to compare (`BODY_TYPE_DELAY`), and whether the exact box left the fat box (the
+    /// caller gives those their new fat box: `refatten`).
+    Fast {
+        parent: Option<&'b RigidBody>,
+        filed: RigidBodyType,
+        left: bool,
+    },
     /// Anything else: the full examination, or a collider that is gone.
     Full,
 }
@@ -274,10 +280,6 @@ pub struct CanopyBroadPhase {
     shapes_scattered: bool,
     shapes_mixed: bool,
     shape_checks: u32,
-    /// Ids written by the fast path of step 2; the first `leaver_count` are proxies whose
-    /// exact box left their fat box this update.
-    leavers: Vec<u32>,
-    leaver_count: usize,
     /// Compare body types late (`BODY_TYPE_DELAY`) whatever the bodies' size: for tests of
     /// that path on small worlds.
     delay_body_types: bool,
@@ -518,37 +520,30 @@ impl CanopyBroadPhase {
     /// The fat box of an exact box: enlarged by the margin (`margins.1` for colliders of fixed
     /// bodies or without a body, `margins.0` for the others), and stretched along the parent's
     /// linear velocity over `velocity_steps` steps.
-    #[inline]
+    ///
+    /// A NaN or infinite stretch (velocity or time step) is left out: the box without it is
+    /// still valid, and the collider stays in the trees.
+    #[inline(always)]
     fn fat_box(
         velocity_steps: f32,
         tight: &Aabb,
         margins: (f32, f32),
         params: &IntegrationParameters,
         parent: Option<&RigidBody>,
-    ) -> Aabb {
+    ) -> BoxLanes {
         let fixed = parent.is_none_or(|rb| rb.is_fixed());
-        let mut fat = tight.loosened(if fixed { margins.1 } else { margins.0 });
-        if let Some(rb) = parent {
+        let margin = if fixed { margins.1 } else { margins.0 };
+        let d = parent.map_or([0.0; 3], |rb| {
             let d = rb.linvel() * (params.dt * velocity_steps);
-            for i in 0..3 {
-                // A NaN or infinite stretch (velocity or time step) is left out: the box
-                // without it is still valid, and the collider stays in the trees.
-                if !d[i].is_finite() {
-                    continue;
-                }
-                if d[i] < 0.0 {
-                    fat.min[i] += d[i];
-                } else {
-                    fat.max[i] += d[i];
-                }
-            }
-        }
-        fat
+            [d.x, d.y, d.z]
+        });
+        BoxLanes::load(tight).fattened(margin, d)
     }
 
     /// Step 2 for one collider: the fast path here, everything else in `examine_full`. On the
-    /// fast path with a parent body, returns that body and the body type the proxy was filed
-    /// under: the caller still has to compare them (`examine_all`). Always inlined into
+    /// fast path, returns the parent body and the body type the proxy was filed under (the
+    /// caller still has to compare them) and whether the exact box left the fat box (the
+    /// caller refattens those a chunk at a time): see `examine_all`. Always inlined into
     /// `examine_all`: called there, `balls` took about 1.1x as long.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
@@ -578,9 +573,9 @@ impl CanopyBroadPhase {
                 && p.filter.same_as_but_body_type(collider, parent.is_some())
             {
                 // Whether the exact box left the fat box waits on the collider's memory: no
-                // branch on it here (a misprediction would stall the loop until that load
-                // arrives). The id is written either way and kept only when it left; those
-                // get their new fat box after the loop (`refatten`).
+                // branch on it here or in the caller (a misprediction would stall the loop
+                // until that load arrives). The caller writes the id either way and keeps it
+                // only when it left; those get their new fat box a chunk later (`refatten`).
                 let left = if WRITTEN_OUT {
                     let tight = &mut self.tights[id as usize];
                     let soft_ccd = parent.is_some_and(|rb| rb.soft_ccd_prediction() > 0.0);
@@ -624,14 +619,11 @@ impl CanopyBroadPhase {
                     self.tights[id as usize] = tight;
                     !p.fat.contains_branchless(&tight)
                 };
-                if let Some(slot) = self.leavers.get_mut(self.leaver_count) {
-                    *slot = id;
-                    self.leaver_count += left as usize;
-                } else if left {
-                    self.leavers.push(id);
-                    self.leaver_count += 1;
-                }
-                return Examined::Fast(parent.map(|rb| (rb, p.filter.body_type)));
+                return Examined::Fast {
+                    parent,
+                    filed: p.filter.body_type,
+                    left,
+                };
             }
         }
         self.examine_full(params, colliders, bodies, handle, margins, events);
@@ -659,7 +651,11 @@ impl CanopyBroadPhase {
             shapes_mixed,
             margins,
         } = *pass;
-        let (mut refattened, mut retyped) = (0, false);
+        let mut retyped = false;
+        // This chunk's leavers (`REFATTEN_WORDS` words: at most 256 colliders) and their
+        // parents: written for every collider, kept (`left`) for those that left.
+        let mut leavers = [(0u32, None::<&RigidBody>); 64 * REFATTEN_WORDS];
+        let mut leaving = 0;
         let mut delayed: [Option<(&RigidBody, RigidBodyType)>; BODY_TYPE_DELAY] =
             [None; BODY_TYPE_DELAY];
         let mut delay_at = 0;
@@ -682,7 +678,19 @@ impl CanopyBroadPhase {
                 } else {
                     self.examine::<true>(params, colliders, bodies, handle, margins, events)
                 };
-                if let Examined::Fast(Some((rb, filed))) = examined {
+                let Examined::Fast {
+                    parent,
+                    filed,
+                    left,
+                } = examined
+                else {
+                    continue;
+                };
+                // No branch on `left` (see `examine`): below 256 leavers so far in this chunk
+                // of at most 256 colliders, so the mask never changes the index.
+                leavers[leaving % leavers.len()] = (index as u32, parent);
+                leaving += left as usize;
+                if let Some(rb) = parent {
                     // No branch on the body type, only an `|=`.
                     if !DELAY {
                         retyped |= rb.body_type() != filed;
@@ -695,13 +703,14 @@ impl CanopyBroadPhase {
                     }
                 }
             }
-            if (w + 1) % REFATTEN_WORDS == 0 {
+            if (w + 1) % REFATTEN_WORDS == 0 || w + 1 == modified.len() {
                 // The chunk's leavers, while their collider and body are cached.
-                refattened =
-                    self.refatten_since(refattened, params, colliders, bodies, margins, events);
+                for &(id, parent) in &leavers[..leaving] {
+                    self.refatten(params, colliders, bodies, id, parent, margins, events);
+                }
+                leaving = 0;
             }
         }
-        self.refatten_since(refattened, params, colliders, bodies, margins, events);
         for (due, filed) in delayed.iter().flatten() {
             retyped |= due.body_type() != *filed;
         }
@@ -741,53 +750,39 @@ impl CanopyBroadPhase {
         }
     }
 
-    /// `refatten` for the leavers recorded from index `from` on; returns the index to go on
-    /// from next time.
+    /// Step 2 for proxy `id` of the fast path, whose exact box left its fat box (`parent`: its
+    /// collider's parent body, as the fast path found it): a new fat box in place, or the full
+    /// examination when that box is not valid.
     #[allow(clippy::too_many_arguments)]
-    fn refatten_since(
-        &mut self,
-        from: usize,
-        params: &IntegrationParameters,
-        colliders: &ColliderSet,
-        bodies: &RigidBodySet,
-        margins: (f32, f32),
-        events: &mut Vec<BroadPhasePairEvent>,
-    ) -> usize {
-        let to = self.leaver_count;
-        for k in from..to {
-            let id = self.leavers[k];
-            self.refatten(params, colliders, bodies, id, margins, events);
-        }
-        to
-    }
-
-    /// Step 2 for a proxy of the fast path whose exact box left its fat box: a new fat box in
-    /// place, or the full examination when that box is not valid.
     fn refatten(
         &mut self,
         params: &IntegrationParameters,
         colliders: &ColliderSet,
         bodies: &RigidBodySet,
         id: u32,
+        parent: Option<&RigidBody>,
         margins: (f32, f32),
         events: &mut Vec<BroadPhasePairEvent>,
     ) {
-        let Some(handle) = self.proxies[id as usize].as_ref().map(|p| p.handle) else {
+        let velocity_steps = self.config.velocity_steps;
+        let fat = Self::fat_box(
+            velocity_steps,
+            &self.tights[id as usize],
+            margins,
+            params,
+            parent,
+        );
+        let Some(p) = self.proxies[id as usize].as_mut() else {
             return;
         };
-        let Some(collider) = colliders.get(handle) else {
-            return;
-        };
-        let parent = collider.parent().and_then(|h| bodies.get(h));
-        let tight = self.tights[id as usize];
-        let fat = Self::fat_box(self.config.velocity_steps, &tight, margins, params, parent);
-        if let (true, Some(p)) = (fat.is_valid(), self.proxies[id as usize].as_mut()) {
+        if fat.is_valid() {
             // Unless the full examination moved it already (filter, tree), only its box changed.
             p.box_only = !p.moved;
-            p.fat = fat;
+            fat.write(&mut p.fat);
             self.trees[p.mobility as usize].set_box(p);
             self.mark_moved(id);
         } else {
+            let handle = p.handle;
             self.examine_full(params, colliders, bodies, handle, margins, events);
         }
     }
@@ -832,7 +827,7 @@ impl CanopyBroadPhase {
         );
         let filter = FilterData::new(collider, parent);
         let mobility = Mobility::of(filter.body_type);
-        let fat = Self::fat_box(velocity_steps, &tight, margins, params, parent);
+        let fat = Self::fat_box(velocity_steps, &tight, margins, params, parent).to_aabb();
         let valid = tight.is_valid() && fat.is_valid();
 
         if id as usize >= self.proxies.len() {
@@ -1361,10 +1356,6 @@ impl BroadPhase for CanopyBroadPhase {
                 *w |= 1 << (index % 64);
             }
         }
-        if self.leavers.len() < modified_colliders.len() {
-            self.leavers.resize(modified_colliders.len(), 0);
-        }
-        self.leaver_count = 0;
         // The bitmap stays set until step 6 has read it. Where shapes are scattered over the
         // heap, the loop asks for the shape `SHAPE_AHEAD` colliders ahead (`shape_queue`: the
         // modified colliders' shape hints, in the loop's order).
