@@ -475,7 +475,17 @@ impl CanopyBroadPhase {
         };
         if let Some(rb) = parent {
             if rb.soft_ccd_prediction() > 0.0 {
-                aabb.merge(&Self::soft_ccd_aabb(params, collider, rb));
+                // A predicted pose from a NaN or infinite velocity or time step gives no box:
+                // the current one stays, valid, rather than the collider leaving the trees.
+                let predicted = Self::soft_ccd_aabb(params, collider, rb);
+                if predicted
+                    .mins
+                    .iter()
+                    .chain(predicted.maxs.iter())
+                    .all(|x| x.is_finite())
+                {
+                    aabb.merge(&predicted);
+                }
                 aabb = aabb.loosened(Self::soft_ccd_reach(params, rb));
             }
         }

@@ -327,6 +327,15 @@ fn random_edit(sim: &mut Sim, rng: &mut Rng) {
         _ => {
             let v = vector![rng.f(-5.0, 5.0), rng.f(-5.0, 5.0), rng.f(-5.0, 5.0)];
             sim.bodies[b].set_linvel(v, true);
+            // Soft CCD on or off now and then: its boxes must stay valid and cover the rest.
+            if rng.below(3) == 0 {
+                let soft = if rng.below(2) == 0 {
+                    0.0
+                } else {
+                    rng.f(0.1, 2.0)
+                };
+                sim.bodies[b].set_soft_ccd_prediction(soft);
+            }
         }
     }
 }
@@ -624,7 +633,8 @@ fn negative_or_nan_loosening_keeps_every_pair() {
 fn bad_integration_parameters_keep_every_pair() {
     // Integration parameters are user input too: a negative or NaN length unit (margins and
     // prediction distance with it) or time step, and NaN or infinite velocities, must neither
-    // panic nor shrink a box below the collider's nor drop a collider from the trees.
+    // panic nor shrink a box below the collider's nor drop a collider from the trees; also for
+    // bodies with soft CCD, whose boxes are predicted from the velocity and time step.
     let mut rng = Rng(99);
     let sim = new_sim(&mut rng, 80);
     let (colliders, mut bodies) = (sim.colliders, sim.bodies);
@@ -632,6 +642,9 @@ fn bad_integration_parameters_keep_every_pair() {
     for (k, &h) in body_handles.iter().enumerate().filter(|(k, _)| k % 5 == 0) {
         let bad = [f32::NAN, f32::INFINITY, -f32::INFINITY][k % 3];
         bodies[h].set_linvel(vector![bad, 1.0, -bad], false);
+    }
+    for (k, &h) in body_handles.iter().enumerate().filter(|(k, _)| k % 2 == 0) {
+        bodies[h].set_soft_ccd_prediction([0.5, f32::INFINITY, f32::MAX][k % 3]);
     }
     let all: Vec<ColliderHandle> = colliders.iter().map(|(h, _)| h).collect();
     for (length_unit, dt) in [
