@@ -774,8 +774,11 @@ impl CanopyBroadPhase {
             else {
                 continue;
             };
-            let retyped = self.proxies[index as usize]
-                .as_ref()
+            // A collider with no proxy (disabled since it came, say) may have no entry at all.
+            let retyped = self
+                .proxies
+                .get(index as usize)
+                .and_then(Option::as_ref)
                 .is_some_and(|p| p.handle == handle && p.filter.body_type != rb.body_type());
             if retyped {
                 self.examine_full(params, colliders, bodies, handle, margins, events);
