@@ -408,7 +408,7 @@ fn run(
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
 
     #[test]
     fn contract_holds_under_random_edits(seed in any::<u64>(), parallel in any::<bool>(), margin in 0.0f32..0.5) {
