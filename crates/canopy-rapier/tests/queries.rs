@@ -593,3 +593,85 @@ fn bad_inputs_give_no_hits_and_no_panic() {
     );
     assert_eq!(far.map(|h| h.0), long.map(|h| h.0));
 }
+
+/// Colliders removed down to one, then a ray cast through Rapier's pipeline over canopy's
+/// mirror: parry 0.22's incremental optimisation of a tree that removals left with one leaf
+/// makes later traversals loop forever, and its builder panics on a lone leaf whose index is
+/// not 0, so the mirror must do neither. The casts run on another thread, so that a
+/// regression fails here instead of hanging the test run.
+#[test]
+fn query_pipeline_answers_after_removals_down_to_one_collider() {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut bodies = RigidBodySet::new();
+        let mut islands = IslandManager::new();
+        let mut colliders = ColliderSet::new();
+        let handles: Vec<ColliderHandle> = [0.0, 1.5, 3.0]
+            .iter()
+            .map(|&x| {
+                colliders.insert(ColliderBuilder::ball(0.5).translation(vector![x, 0.0, 0.0]))
+            })
+            .collect();
+        let narrow = NarrowPhase::new();
+        let mut canopy = CanopyBroadPhase::new();
+        let params = IntegrationParameters::default();
+        let mut events = Vec::new();
+        canopy.update(&params, &colliders, &bodies, &handles, &[], &mut events);
+        let ray = Ray::new(point![-5.0, 0.0, 0.0], vector![1.0, 0.0, 0.0]);
+        let first = canopy
+            .as_query_pipeline(
+                narrow.query_dispatcher(),
+                &bodies,
+                &colliders,
+                QueryFilter::default(),
+            )
+            .cast_ray(&ray, 100.0, true)
+            .map(|(h, _)| h);
+        for &h in &handles[..2] {
+            colliders.remove(h, &mut islands, &mut bodies, false);
+        }
+        canopy.update(
+            &params,
+            &colliders,
+            &bodies,
+            &[],
+            &handles[..2],
+            &mut events,
+        );
+        let last = canopy
+            .as_query_pipeline(
+                narrow.query_dispatcher(),
+                &bodies,
+                &colliders,
+                QueryFilter::default(),
+            )
+            .cast_ray(&ray, 100.0, true)
+            .map(|(h, _)| h);
+        // A mirror whose first build sees one collider, of index 2 (parry's builder takes a
+        // lone leaf's index to be 0).
+        let mut fresh = CanopyBroadPhase::new();
+        fresh.update(
+            &params,
+            &colliders,
+            &bodies,
+            &handles[2..],
+            &[],
+            &mut events,
+        );
+        let lone = fresh
+            .as_query_pipeline(
+                narrow.query_dispatcher(),
+                &bodies,
+                &colliders,
+                QueryFilter::default(),
+            )
+            .cast_ray(&ray, 100.0, true)
+            .map(|(h, _)| h);
+        let _ = tx.send((first, last, lone));
+    });
+    let answers = rx.recv_timeout(std::time::Duration::from_secs(20));
+    let (first, last, lone) = answers.expect("the ray casts did not return");
+    assert_eq!(first, Some(ColliderHandle::from_raw_parts(0, 0)));
+    assert_eq!(last, Some(ColliderHandle::from_raw_parts(2, 0)));
+    assert_eq!(lone, last);
+}

@@ -17,6 +17,10 @@ use rustc_hash::FxHashMap;
 /// unit 1): a leaf is stored this much larger than the fat box.
 const CHANGE_MARGIN: f32 = 1.0e-2;
 
+/// A mirror with at most this many leaves after a sync's changes is rebuilt rather than
+/// optimised (see `sync_query_pipeline`).
+const SMALL_TREE: u32 = 32;
+
 /// The parry BVH behind `as_query_pipeline` and the proxies changed since it was synced.
 #[derive(Clone, Default)]
 pub(crate) struct QueryMirror {
@@ -165,13 +169,7 @@ impl CanopyBroadPhase {
             let boxes: Vec<Option<Aabb>> = (0..n as u32)
                 .map(|id| self.mirror_box(id, colliders, &extra))
                 .collect();
-            self.mirror.bvh = Bvh::from_iter(
-                BvhBuildStrategy::Binned,
-                boxes
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(i, b)| b.map(|b| (i, b))),
-            );
+            self.mirror.bvh = build(&boxes);
             self.mirror.leaves = boxes;
             return;
         }
@@ -209,9 +207,34 @@ impl CanopyBroadPhase {
         }
         if changed {
             let mirror = &mut self.mirror;
-            // As Rapier's own broadphase does: optimise a part of the tree, then refit.
-            mirror.bvh.optimize_incremental(&mut mirror.workspace);
-            mirror.bvh.refit(&mut mirror.workspace);
+            if mirror.bvh.leaf_count() <= SMALL_TREE {
+                // parry 0.22's `optimize_incremental` on a tree that removals left with one
+                // leaf makes every later traversal loop forever (a ray cast never returns).
+                // A small tree is built afresh instead, for about what the update costs.
+                mirror.bvh = build(&mirror.leaves);
+            } else {
+                // As Rapier's own broadphase does: optimise a part of the tree, then refit.
+                mirror.bvh.optimize_incremental(&mut mirror.workspace);
+                mirror.bvh.refit(&mut mirror.workspace);
+            }
         }
     }
+}
+
+/// A parry BVH over `leaves` (the box of each collider index that has one). parry 0.22's
+/// builder mislabels the leaves of a tree of one or two (it takes their indices to be 0 and
+/// 1, and panics when they are not), so those are inserted one by one instead.
+fn build(leaves: &[Option<Aabb>]) -> Bvh {
+    let items = leaves
+        .iter()
+        .enumerate()
+        .filter_map(|(i, b)| b.map(|b| (i, b)));
+    if leaves.iter().flatten().count() > 2 {
+        return Bvh::from_iter(BvhBuildStrategy::Binned, items);
+    }
+    let mut bvh = Bvh::default();
+    for (i, b) in items {
+        bvh.insert(b, i as u32);
+    }
+    bvh
 }
