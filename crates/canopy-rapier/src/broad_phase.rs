@@ -719,8 +719,8 @@ impl CanopyBroadPhase {
                 else {
                     continue;
                 };
-                // No branch on `left` (see `examine`): below 256 leavers so far in this chunk
-                // of at most 256 colliders, so the mask never changes the index.
+                // No branch on `left` (see `examine`): fewer than 256 leavers so far in this
+                // chunk of at most 256 colliders, so the modulo never changes the index.
                 leavers[leaving % leavers.len()] = (index as u32, parent);
                 leaving += left as usize;
                 if let Some(rb) = parent {
