@@ -1,10 +1,11 @@
 //! `BoxLanes`: a box's six floats as two overlapping four-lane vectors, the way the examine
-//! loop computes a collider's exact box, stores it and tests it against the fat box without
-//! moving single floats between registers: `lo` holds `min.x, min.y, min.z, max.x` (the box's
-//! floats 0..4) and `hi` holds `min.z, max.x, max.y, max.z` (floats 2..6). SSE on x86_64 (always
-//! there), plain arrays elsewhere; both compute every coordinate with the same floating-point
-//! operations as parry does, so the boxes are the same to the bit (a NaN stays a NaN; its sign
-//! and payload are not kept by the compiler anyway).
+//! loop computes a collider's exact box, stores it, tests it against the fat box and makes the
+//! new fat box, without moving single floats between registers: `lo` holds `min.x, min.y,
+//! min.z, max.x` (the box's floats 0..4) and `hi` holds `min.z, max.x, max.y, max.z` (floats
+//! 2..6). SSE on x86_64 (always there), plain arrays elsewhere. Both compute every coordinate
+//! of a collision box with the same floating-point operations as parry does, so those boxes
+//! are the same to the bit (a NaN stays a NaN; its sign and payload are not kept by the
+//! compiler anyway).
 
 use canopy_core::Aabb;
 
@@ -41,7 +42,8 @@ impl BoxLanes {
     /// The box enlarged by `margin` on every side (`Aabb::loosened`), then stretched by `d`:
     /// each finite coordinate of `d` moves the lower side when negative, the upper side
     /// otherwise; a NaN or infinite one is left out. (The fat box of a proxy: `d` is the
-    /// body's motion over the velocity stretch.)
+    /// body's motion over the velocity stretch.) A side left where it was gets `+ 0.0`, which
+    /// turns a `-0.0` into `0.0`: the same number.
     #[inline(always)]
     pub(crate) fn fattened(self, margin: f32, d: [f32; 3]) -> Self {
         let [x, y, z] = d;
