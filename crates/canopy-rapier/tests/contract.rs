@@ -200,11 +200,30 @@ const TYPES: [RigidBodyType; 4] = [
     RigidBodyType::KinematicVelocityBased,
 ];
 
+thread_local! {
+    /// Set by tests whose colliders get negative contact skins: Rapier's narrow phase panics
+    /// on a compound shape with a negative contact distance (parry's loosening refuses it).
+    static NO_COMPOUNDS: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
 fn random_shape(rng: &mut Rng) -> ColliderBuilder {
-    match rng.below(3) {
-        0 => ColliderBuilder::ball(rng.f(0.2, 1.0)),
-        1 => ColliderBuilder::cuboid(rng.f(0.1, 1.0), rng.f(0.1, 1.0), rng.f(0.1, 1.0)),
-        _ => ColliderBuilder::capsule_y(rng.f(0.1, 0.8), rng.f(0.1, 0.5)),
+    let kinds = if NO_COMPOUNDS.get() { 7 } else { 8 };
+    match rng.below(kinds) {
+        0 | 1 => ColliderBuilder::ball(rng.f(0.2, 1.0)),
+        2 | 3 => ColliderBuilder::cuboid(rng.f(0.1, 1.0), rng.f(0.1, 1.0), rng.f(0.1, 1.0)),
+        4 | 5 => ColliderBuilder::capsule_y(rng.f(0.1, 0.8), rng.f(0.1, 0.5)),
+        // Shapes whose boxes come from parry's own code, in worlds of mixed shapes.
+        6 => ColliderBuilder::cylinder(rng.f(0.1, 0.8), rng.f(0.1, 0.6)),
+        _ => ColliderBuilder::compound(vec![
+            (
+                Isometry::translation(rng.f(-0.5, 0.5), 0.0, 0.0),
+                SharedShape::ball(rng.f(0.1, 0.5)),
+            ),
+            (
+                Isometry::rotation(vector![0.0, rng.f(0.0, 3.0), 0.0]),
+                SharedShape::cuboid(rng.f(0.1, 0.6), 0.2, 0.3),
+            ),
+        ]),
     }
 }
 
@@ -612,6 +631,7 @@ fn negative_or_nan_loosening_keeps_every_pair() {
     // so Rapier's own broadphase, panics on them), among ordinary ones, stepped under random
     // edits: nothing panics, they are counted, and the contract holds against their shapes'
     // own boxes.
+    NO_COMPOUNDS.set(true);
     let mut rng = Rng(2024);
     let mut sim = new_sim(&mut rng, 60);
     let handles: Vec<ColliderHandle> = sim.colliders.iter().map(|(h, _)| h).collect();
