@@ -5,7 +5,7 @@
 //! active contact must be live in canopy.
 
 use canopy::rapier::CanopyBroadPhase;
-use canopy::scenes::{Scene, World};
+use canopy::scenes::{Scene, World, XorShift};
 use rapier3d::prelude::*;
 
 /// Rapier's broadphase drives the simulation; canopy sees the same updates.
@@ -41,7 +41,7 @@ impl BroadPhase for Twin {
 
 /// Thin fixed walls, and fast balls and flat boxes with soft CCD thrown at them (and past
 /// each other) from random positions, with random spins and soft-CCD distances.
-fn scene(seed: u32) -> Scene {
+fn scene(seed: u64) -> Scene {
     let mut s = Scene::empty("soft_ccd");
     let ground = s.bodies.insert(RigidBodyBuilder::fixed());
     s.colliders.insert_with_parent(
@@ -63,13 +63,8 @@ fn scene(seed: u32) -> Scene {
             &mut s.bodies,
         );
     }
-    let mut x = seed.wrapping_mul(2_654_435_761) | 1;
-    let mut r = move || {
-        x ^= x << 13;
-        x ^= x >> 17;
-        x ^= x << 5;
-        x as f32 / u32::MAX as f32
-    };
+    let mut rng = XorShift::new(seed);
+    let mut r = move || rng.next_f32();
     for i in 0..200 {
         let speed = 20.0 + 200.0 * r();
         let body = s.bodies.insert(

@@ -617,16 +617,19 @@ fn query_pipeline_answers_after_removals_down_to_one_collider() {
         let params = IntegrationParameters::default();
         let mut events = Vec::new();
         canopy.update(&params, &colliders, &bodies, &handles, &[], &mut events);
-        let ray = Ray::new(point![-5.0, 0.0, 0.0], vector![1.0, 0.0, 0.0]);
-        let first = canopy
-            .as_query_pipeline(
+        // The first collider hit along the x axis, through Rapier's pipeline over the mirror.
+        let hit = |bp: &mut CanopyBroadPhase, colliders: &ColliderSet, bodies: &RigidBodySet| {
+            let ray = Ray::new(point![-5.0, 0.0, 0.0], vector![1.0, 0.0, 0.0]);
+            bp.as_query_pipeline(
                 narrow.query_dispatcher(),
-                &bodies,
-                &colliders,
+                bodies,
+                colliders,
                 QueryFilter::default(),
             )
             .cast_ray(&ray, 100.0, true)
-            .map(|(h, _)| h);
+            .map(|(h, _)| h)
+        };
+        let first = hit(&mut canopy, &colliders, &bodies);
         for &h in &handles[..2] {
             colliders.remove(h, &mut islands, &mut bodies, false);
         }
@@ -638,15 +641,7 @@ fn query_pipeline_answers_after_removals_down_to_one_collider() {
             &handles[..2],
             &mut events,
         );
-        let last = canopy
-            .as_query_pipeline(
-                narrow.query_dispatcher(),
-                &bodies,
-                &colliders,
-                QueryFilter::default(),
-            )
-            .cast_ray(&ray, 100.0, true)
-            .map(|(h, _)| h);
+        let last = hit(&mut canopy, &colliders, &bodies);
         // A mirror whose first build sees one collider, of index 2 (parry's builder takes a
         // lone leaf's index to be 0).
         let mut fresh = CanopyBroadPhase::new();
@@ -658,15 +653,7 @@ fn query_pipeline_answers_after_removals_down_to_one_collider() {
             &[],
             &mut events,
         );
-        let lone = fresh
-            .as_query_pipeline(
-                narrow.query_dispatcher(),
-                &bodies,
-                &colliders,
-                QueryFilter::default(),
-            )
-            .cast_ray(&ray, 100.0, true)
-            .map(|(h, _)| h);
+        let lone = hit(&mut fresh, &colliders, &bodies);
         let _ = tx.send((first, last, lone));
     });
     let answers = rx.recv_timeout(std::time::Duration::from_secs(20));
