@@ -662,3 +662,55 @@ fn query_pipeline_answers_after_removals_down_to_one_collider() {
     assert_eq!(last, Some(ColliderHandle::from_raw_parts(2, 0)));
     assert_eq!(lone, last);
 }
+
+/// A collider added and recorded with `refresh_queries`, then moved to a NaN position before
+/// Rapier's pipeline is asked for: the pipeline answers as over the same world without it. In
+/// a mirror small enough to be rebuilt, its NaN box used to cost the box query two other
+/// colliders; in one large enough to be optimised in place, parry's tree panicked on it
+/// (index out of bounds in its binned build); also a mirror whose first build sees it.
+#[test]
+fn query_pipeline_leaves_out_a_collider_edited_to_nan_since_refresh() {
+    let bodies = RigidBodySet::new();
+    let narrow = NarrowPhase::new();
+    let params = IntegrationParameters::default();
+    for (n, synced_before) in [(10, true), (40, true), (100, true), (40, false)] {
+        let mut colliders = ColliderSet::new();
+        let handles: Vec<ColliderHandle> = (0..n)
+            .map(|i| {
+                colliders
+                    .insert(ColliderBuilder::ball(0.6).translation(vector![i as f32, 0.0, 0.0]))
+            })
+            .collect();
+        let mut canopy = CanopyBroadPhase::new();
+        canopy.update(&params, &colliders, &bodies, &handles, &[], &mut Vec::new());
+        // The first hit along the x axis, and every collider a box around the row meets.
+        let ask = |bp: &mut CanopyBroadPhase, colliders: &ColliderSet| {
+            let pipeline = bp.as_query_pipeline(
+                narrow.query_dispatcher(),
+                &bodies,
+                colliders,
+                QueryFilter::default(),
+            );
+            let ray = Ray::new(point![-5.0, 0.0, 0.0], vector![1.0, 0.0, 0.0]);
+            let first = pipeline.cast_ray(&ray, 1.0e3, true).map(|(h, _)| h);
+            let row = Aabb::new(point![-2.0, -2.0, -2.0], point![n as f32 + 2.0, 2.0, 2.0]);
+            let mut met: Vec<ColliderHandle> = pipeline
+                .intersect_aabb_conservative(row)
+                .map(|(h, _)| h)
+                .collect();
+            met.sort_by_key(|h| h.into_raw_parts());
+            (first, met)
+        };
+        let before = ask(&mut canopy.clone(), &colliders);
+        if synced_before {
+            ask(&mut canopy, &colliders);
+        }
+        let edited =
+            colliders.insert(ColliderBuilder::ball(1.0).translation(vector![-3.0, 0.0, 0.0]));
+        canopy.refresh_queries(&colliders);
+        colliders[edited].set_translation(vector![f32::NAN, 0.0, 0.0]);
+        let answer = ask(&mut canopy, &colliders);
+        assert_eq!(answer.0, Some(handles[0]), "{n} colliders");
+        assert_eq!(answer, before, "{n} colliders");
+    }
+}

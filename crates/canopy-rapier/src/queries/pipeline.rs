@@ -70,7 +70,10 @@ impl QueryMirror {
 
 impl CanopyBroadPhase {
     /// The box the mirror should hold for collider index `id`: the proxy's fat box when it is
-    /// current, else the collider's current box when it was edited since the last update.
+    /// current, else the collider's current box when it was edited since the last update, if
+    /// that box is finite. (The collider may have been edited again since `refresh_queries`
+    /// checked it; a NaN box would make parry's tree panic, and a collider with no valid box
+    /// is left out of the queries, as it is out of the broadphase's trees.)
     fn mirror_box(
         &self,
         id: u32,
@@ -84,7 +87,10 @@ impl CanopyBroadPhase {
                 }
             }
         }
-        colliders.get(*extra.get(&id)?).map(|c| c.compute_aabb())
+        colliders
+            .get(*extra.get(&id)?)
+            .map(|c| c.compute_aabb())
+            .filter(|b| crate::queries::finite(b.mins.iter().chain(b.maxs.iter())))
     }
 
     /// Rapier's own `QueryPipeline` (as `BroadPhaseBvh::as_query_pipeline` returns it) over
