@@ -714,3 +714,62 @@ fn query_pipeline_leaves_out_a_collider_edited_to_nan_since_refresh() {
         assert_eq!(answer, before, "{n} colliders");
     }
 }
+
+/// Rays whose direction has no length in `f32` (zero, or too small for its squared length to
+/// be above 0), from inside a cuboid and from outside it. parry's box test names a face that
+/// does not exist for such a ray when asked for the normal (a subtraction overflow, a panic in
+/// debug builds; a bogus face in release). Every ray query answers as `cast_ray` does (parry's
+/// answer, with no normal to name): a hit at 0 from inside a solid cuboid, nothing from
+/// outside; the queries that give a normal give a zero one, as parry does for a solid hit
+/// from inside.
+#[test]
+fn rays_without_a_direction_hit_only_where_they_start() {
+    let bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let cube = colliders.insert(ColliderBuilder::cuboid(1.0, 1.0, 1.0));
+    let mut canopy = CanopyBroadPhase::new();
+    let params = IntegrationParameters::default();
+    canopy.update(&params, &colliders, &bodies, &[cube], &[], &mut Vec::new());
+    let narrow = NarrowPhase::new();
+    let q = canopy.scene_queries(
+        narrow.query_dispatcher(),
+        &bodies,
+        &colliders,
+        QueryFilter::default(),
+    );
+    let dirs = [
+        vector![0.0, 0.0, 0.0],
+        vector![1.0e-45, 0.0, 0.0],
+        vector![0.0, -1.0e-30, 1.0e-30],
+    ];
+    for (origin, inside) in [
+        (point![0.0, 0.0, 0.0], true),
+        (point![-5.0, 0.0, 0.0], false),
+    ] {
+        for dir in dirs {
+            let ray = Ray::new(origin, dir);
+            for max_toi in [0.0, 1.0, Real::MAX] {
+                for solid in [true, false] {
+                    let at = format!("{origin:?} {dir:?} {max_toi} {solid}");
+                    let expected = q.cast_ray(&ray, max_toi, solid);
+                    if !inside {
+                        assert_eq!(expected, None, "{at}");
+                    } else if solid {
+                        assert_eq!(expected, Some((cube, 0.0)), "{at}");
+                    }
+                    let with_normal = q
+                        .cast_ray_and_get_normal(&ray, max_toi, solid)
+                        .map(|(h, hit)| (h, hit.time_of_impact, hit.normal));
+                    let zero = vector![0.0, 0.0, 0.0];
+                    assert_eq!(with_normal, expected.map(|(h, t)| (h, t, zero)), "{at}");
+                    let all: Vec<(ColliderHandle, Real)> = q
+                        .intersect_ray(ray, max_toi, solid)
+                        .map(|(h, _, hit)| (h, hit.time_of_impact))
+                        .collect();
+                    assert_eq!(all, expected.into_iter().collect::<Vec<_>>(), "{at}");
+                    assert_eq!(q.cast_rays(&[ray], max_toi, solid), vec![expected], "{at}");
+                }
+            }
+        }
+    }
+}

@@ -3,8 +3,31 @@
 
 use super::{valid_ray, SceneQueries};
 use crate::filter::Mobility;
-use rapier3d::prelude::{Collider, ColliderHandle, QueryFilter, Ray, RayIntersection, Real};
+use rapier3d::parry::shape::FeatureId;
+use rapier3d::prelude::{
+    Collider, ColliderHandle, QueryFilter, Ray, RayIntersection, Real, Vector,
+};
 use rayon::prelude::*;
+
+/// parry's `cast_ray_and_get_normal` on `collider`, except for a ray whose direction has no
+/// length in `f32` (its squared length is 0): parry's box test names a face that does not
+/// exist for such a ray (a subtraction overflow, which panics in debug builds, and a bogus
+/// face in release). Such a ray can only hit where it starts, so it gets `cast_ray`'s answer
+/// with a zero normal and no feature, as parry reports a solid hit from inside a shape.
+fn hit_with_normal(
+    collider: &Collider,
+    ray: &Ray,
+    max_toi: Real,
+    solid: bool,
+) -> Option<RayIntersection> {
+    let (shape, pose) = (collider.shape(), collider.position());
+    if ray.dir.norm_squared() > 0.0 {
+        return shape.cast_ray_and_get_normal(pose, ray, max_toi, solid);
+    }
+    shape
+        .cast_ray(pose, ray, max_toi, solid)
+        .map(|t| RayIntersection::new(t, Vector::zeros(), FeatureId::Unknown))
+}
 
 impl<'a> SceneQueries<'a> {
     /// The closest hit of `ray` within `max_toi` (in units of `ray.dir`), as Rapier's
@@ -33,10 +56,7 @@ impl<'a> SceneQueries<'a> {
         solid: bool,
     ) -> Option<(ColliderHandle, RayIntersection)> {
         self.closest_ray_hit(ray, max_toi, |collider, t_max| {
-            collider
-                .shape()
-                .cast_ray_and_get_normal(collider.position(), ray, t_max, solid)
-                .map(|hit| (hit.time_of_impact, hit))
+            hit_with_normal(collider, ray, t_max, solid).map(|hit| (hit.time_of_impact, hit))
         })
         .map(|(handle, _, hit)| (handle, hit))
     }
@@ -57,11 +77,7 @@ impl<'a> SceneQueries<'a> {
         let bp = self.broad_phase;
         let cray = canopy_core::Ray::new(ray.origin, ray.dir);
         let mut test = |handle: ColliderHandle, collider: &'a Collider| {
-            if let Some(hit) =
-                collider
-                    .shape()
-                    .cast_ray_and_get_normal(collider.position(), &ray, max_toi, solid)
-            {
+            if let Some(hit) = hit_with_normal(collider, &ray, max_toi, solid) {
                 hits.push((handle, collider, hit));
             }
         };
