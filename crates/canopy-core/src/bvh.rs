@@ -69,10 +69,11 @@ impl Node {
         Aabb::from_arrays(self.min, self.max)
     }
 
-    /// Primitive slot range of a leaf.
+    /// Primitive slot range of a leaf (added in `usize`, so a hand-made node near `u32::MAX`
+    /// gives its range rather than an overflow).
     #[inline(always)]
     pub fn leaf_range(&self) -> std::ops::Range<usize> {
-        self.first as usize..(self.first + self.count) as usize
+        self.first as usize..self.first as usize + self.count as usize
     }
 }
 
@@ -286,5 +287,21 @@ impl Bvh {
     /// The box of the whole tree, `None` when empty.
     pub fn root_aabb(&self) -> Option<Aabb> {
         self.nodes.first().map(Node::aabb)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A leaf's slot range, for nodes made by hand anywhere in `u32`'s range, including ranges
+    /// that end past `u32::MAX`.
+    #[test]
+    fn leaf_range_is_first_plus_count() {
+        for (first, count) in [(0u32, 1u32), (7, 3), (u32::MAX - 1, 1), (u32::MAX, 2)] {
+            let n = Node::leaf([0.0; 3], [1.0; 3], first, count);
+            let start = first as usize;
+            assert_eq!(n.leaf_range(), start..start + count as usize);
+        }
     }
 }

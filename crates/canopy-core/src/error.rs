@@ -36,6 +36,14 @@ pub enum BvhError {
     /// A build option is out of range.
     #[error("invalid build options: {0}")]
     InvalidOptions(&'static str),
+    /// [`crate::build::radix_sort_pairs`] was given a different number of values than keys.
+    #[error("{keys} keys to sort but {values} values")]
+    KeysValuesMismatch {
+        /// Number of keys given.
+        keys: usize,
+        /// Number of values given.
+        values: usize,
+    },
 }
 
 /// A broken tree invariant found by [`crate::Bvh::validate`].

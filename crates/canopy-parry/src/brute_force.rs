@@ -15,15 +15,15 @@ pub type TruthPair = (usize, usize, Vec<Manifold>);
 
 /// `DefaultQueryDispatcher.contact_manifolds(pose_i⁻¹·pose_j, shape_i, shape_j, prediction)`
 /// called fresh on pair `(i, j)`: its manifolds when some point is within `prediction` (see
-/// [`in_contact`]).
+/// [`in_contact`]). `None` also when `i` or `j` is not an index of `objects`.
 pub fn pair(
     objects: &[(Isometry3<f32>, SharedShape)],
     i: usize,
     j: usize,
     prediction: f32,
 ) -> Option<Vec<Manifold>> {
-    let (pose1, shape1) = &objects[i];
-    let (pose2, shape2) = &objects[j];
+    let (pose1, shape1) = objects.get(i)?;
+    let (pose2, shape2) = objects.get(j)?;
     let pos12 = pose1.inv_mul(pose2);
     let mut manifolds = Vec::new();
     DefaultQueryDispatcher
@@ -135,4 +135,26 @@ pub fn self_contacts(
 /// `true` when `shape` is something parry's dispatcher handles as one convex piece.
 pub fn is_convex(shape: &dyn Shape) -> bool {
     shape.is_convex()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An index past the objects gives `None`, on either side; in range, the same pair gives
+    /// parry's manifolds (two touching balls).
+    #[test]
+    fn pair_outside_the_objects_is_none() {
+        let objects = [
+            (Isometry3::identity(), SharedShape::ball(1.0)),
+            (
+                Isometry3::translation(1.5, 0.0, 0.0),
+                SharedShape::ball(1.0),
+            ),
+        ];
+        assert!(pair(&objects, 0, 1, 0.0).is_some());
+        for (i, j) in [(0, 2), (5, 1), (2, 2), (usize::MAX, 0)] {
+            assert!(pair(&objects, i, j, 0.0).is_none(), "({i}, {j})");
+        }
+    }
 }

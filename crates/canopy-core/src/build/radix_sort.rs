@@ -2,6 +2,7 @@
 //! histogram and scatter for large inputs. The LBVH builder sorts Morton codes with it. A stable
 //! sort has one answer, so the output does not depend on the thread count.
 
+use crate::BvhError;
 use rayon::prelude::*;
 
 const DIGIT_BITS: u32 = 11;
@@ -18,21 +19,34 @@ fn digit(key: u64, pass: u32) -> usize {
 /// Sorts `keys` ascending, applying the same permutation to `values`; equal keys keep their
 /// order. `parallel` uses the current rayon pool for large inputs.
 ///
-/// # Panics
-/// When `keys` and `values` differ in length (an internal precondition).
+/// # Errors
+/// [`BvhError::KeysValuesMismatch`] when `keys` and `values` differ in length; both are then
+/// left as they were.
 ///
 /// ```
 /// let mut keys = vec![5u64, 1, 5, 0];
 /// let mut vals = vec![0u32, 1, 2, 3];
-/// canopy_core::build::radix_sort_pairs(&mut keys, &mut vals, false);
+/// canopy_core::build::radix_sort_pairs(&mut keys, &mut vals, false)?;
 /// assert_eq!(keys, [0, 1, 5, 5]);
 /// assert_eq!(vals, [3, 1, 0, 2]);
+/// assert!(canopy_core::build::radix_sort_pairs(&mut keys, &mut vec![0], false).is_err());
+/// assert_eq!(keys, [0, 1, 5, 5]);
+/// # Ok::<(), canopy_core::BvhError>(())
 /// ```
-pub fn radix_sort_pairs(keys: &mut Vec<u64>, values: &mut Vec<u32>, parallel: bool) {
-    assert_eq!(keys.len(), values.len());
+pub fn radix_sort_pairs(
+    keys: &mut Vec<u64>,
+    values: &mut Vec<u32>,
+    parallel: bool,
+) -> Result<(), BvhError> {
+    if keys.len() != values.len() {
+        return Err(BvhError::KeysValuesMismatch {
+            keys: keys.len(),
+            values: values.len(),
+        });
+    }
     let n = keys.len();
     if n < 2 {
-        return;
+        return Ok(());
     }
     // Digits every key shares need no pass.
     let or = keys.iter().fold(0u64, |a, &k| a | k);
@@ -53,6 +67,7 @@ pub fn radix_sort_pairs(keys: &mut Vec<u64>, values: &mut Vec<u32>, parallel: bo
         std::mem::swap(keys, &mut tmp_keys);
         std::mem::swap(values, &mut tmp_vals);
     }
+    Ok(())
 }
 
 fn scatter_serial(keys: &[u64], vals: &[u32], dk: &mut [u64], dv: &mut [u32], pass: u32) {
@@ -317,7 +332,7 @@ mod tests {
     fn check(keys: Vec<u64>, parallel: bool) {
         let mut k = keys.clone();
         let mut v: Vec<u32> = (0..keys.len() as u32).collect();
-        radix_sort_pairs(&mut k, &mut v, parallel);
+        radix_sort_pairs(&mut k, &mut v, parallel).expect("same lengths");
         let mut expect: Vec<(u64, u32)> = keys.iter().copied().zip(0..).collect();
         expect.sort(); // (key, original index): the stable order
         assert_eq!(k, expect.iter().map(|e| e.0).collect::<Vec<_>>());
@@ -370,6 +385,27 @@ mod tests {
             let few: Vec<u64> = (0..n).map(|_| rnd() % 5).collect();
             check(few.clone(), true);
             check(few, false);
+        }
+    }
+
+    /// Keys and values of different lengths are refused, serial or parallel, with both left as
+    /// they were.
+    #[test]
+    fn mismatched_lengths_are_refused_untouched() {
+        for (nk, nv) in [(2usize, 1usize), (0, 1), (1, 0), (5, 7), (1000, 999)] {
+            let keys: Vec<u64> = (0..nk as u64).rev().collect();
+            let values: Vec<u32> = (0..nv as u32).collect();
+            for parallel in [false, true] {
+                let (mut k, mut v) = (keys.clone(), values.clone());
+                assert_eq!(
+                    radix_sort_pairs(&mut k, &mut v, parallel),
+                    Err(BvhError::KeysValuesMismatch {
+                        keys: nk,
+                        values: nv
+                    })
+                );
+                assert_eq!((k, v), (keys.clone(), values.clone()));
+            }
         }
     }
 }
