@@ -212,7 +212,14 @@ pub struct Bvh {
     /// `query/ray.rs`): made by the first such query after a build, refit with the tree once
     /// made.
     pub(crate) ray4: std::sync::OnceLock<crate::query::ray::Ray4>,
+    /// Which build made this tree: a number no other build in this process gets (0 for a tree
+    /// made by [`Bvh::new`]), kept by refits and clones, which keep the topology. Pair marks
+    /// carry the stamp of the tree they were made for (`PairMarks`).
+    pub(crate) stamp: u64,
 }
+
+/// The stamp of the next build (see [`Bvh::stamp`]).
+static NEXT_STAMP: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 impl Bvh {
     /// Builds a tree over `aabbs` with the builder chosen in `options`.
@@ -240,7 +247,9 @@ impl Bvh {
     /// # Ok::<(), canopy_core::BvhError>(())
     /// ```
     pub fn build(aabbs: &[Aabb], options: BuildOptions) -> Result<Bvh, BvhError> {
-        build::build(aabbs, &options)
+        let mut bvh = build::build(aabbs, &options)?;
+        bvh.stamp = NEXT_STAMP.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        Ok(bvh)
     }
 
     /// The wide array (see [`Wide`]), made on first use.

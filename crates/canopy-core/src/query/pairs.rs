@@ -48,10 +48,13 @@ fn half_area(n: &Node) -> f32 {
 }
 
 /// Which primitives a marked pair query is about, summarised per node: made by
-/// [`Bvh::marks`] for one tree, valid for that tree until it is rebuilt (refit keeps it valid).
-/// Marks made for another tree are treated as "everything marked": never a missed pair.
+/// [`Bvh::marks`] for one tree, valid for that tree and its clones until it is rebuilt (refit
+/// keeps it valid). Marks made for another tree, even one of the same size, are treated as
+/// "everything marked": never a missed pair.
 #[derive(Clone, Debug, Default)]
 pub struct PairMarks {
+    /// The stamp of the build they were made for (`Bvh::stamp`).
+    stamp: u64,
     nodes: Vec<bool>,
     slots: Vec<bool>,
     /// Per node of the tree's four-wide copy, the lanes with a marked primitive under them.
@@ -761,6 +764,7 @@ impl Bvh {
             super::pairs4::lane_marks(self, &slots, marked)
         };
         PairMarks {
+            stamp: self.stamp,
             nodes,
             slots,
             lanes,
@@ -772,7 +776,8 @@ impl Bvh {
     /// Marks made for a tree also made its four-wide copy, so a tree without one gets `None`
     /// rather than a copy built only for this check.
     fn checked_marks<'a>(&self, marks: &'a PairMarks) -> Option<&'a PairMarks> {
-        (marks.nodes.len() == self.nodes.len()
+        (marks.stamp == self.stamp
+            && marks.nodes.len() == self.nodes.len()
             && marks.slots.len() == self.len()
             && (self.nodes.is_empty()
                 || self
