@@ -71,9 +71,10 @@ impl QueryMirror {
 impl CanopyBroadPhase {
     /// The box the mirror should hold for collider index `id`: the proxy's fat box when it is
     /// current, else the collider's current box when it was edited since the last update, if
-    /// that box is finite. (The collider may have been edited again since `refresh_queries`
-    /// checked it; a NaN box would make parry's tree panic, and a collider with no valid box
-    /// is left out of the queries, as it is out of the broadphase's trees.)
+    /// that box is valid by the test `refresh_queries` makes. (The collider may have been
+    /// edited again since `refresh_queries` checked it; a NaN box would make parry's tree
+    /// panic, and a collider with no valid box is left out of the queries, as it is out of the
+    /// broadphase's trees.)
     fn mirror_box(
         &self,
         id: u32,
@@ -90,7 +91,7 @@ impl CanopyBroadPhase {
         colliders
             .get(*extra.get(&id)?)
             .map(|c| c.compute_aabb())
-            .filter(|b| crate::queries::finite(b.mins.iter().chain(b.maxs.iter())))
+            .filter(|b| canopy_core::Aabb::new(b.mins, b.maxs).is_valid())
     }
 
     /// Rapier's own `QueryPipeline` (as `BroadPhaseBvh::as_query_pipeline` returns it) over
