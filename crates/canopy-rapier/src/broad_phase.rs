@@ -481,7 +481,17 @@ impl CanopyBroadPhase {
                 if crate::queries::finite(predicted.mins.iter().chain(predicted.maxs.iter())) {
                     aabb.merge(&predicted);
                 }
+                let finite = crate::queries::finite(aabb.mins.iter().chain(aabb.maxs.iter()));
                 aabb = aabb.loosened(Self::soft_ccd_reach(params, rb));
+                if finite {
+                    // A finite box loosened past `f32::MAX` (a huge reach near huge
+                    // coordinates) stops there rather than becoming invalid.
+                    let clamp = |p: Point<f32>| p.map(|x| x.clamp(-f32::MAX, f32::MAX));
+                    aabb = rapier3d::parry::bounding_volume::Aabb::new(
+                        clamp(aabb.mins),
+                        clamp(aabb.maxs),
+                    );
+                }
             }
         }
         Aabb::new(aabb.mins, aabb.maxs)
@@ -550,7 +560,9 @@ impl CanopyBroadPhase {
     /// linear velocity over `velocity_steps` steps.
     ///
     /// A NaN or infinite stretch (velocity or time step) is left out: the box without it is
-    /// still valid, and the collider stays in the trees.
+    /// still valid, and the collider stays in the trees. A fat box that overflows `f32` (a huge
+    /// margin or stretch, which the configuration accepts) stops at `±f32::MAX`: see
+    /// `finite_fat_box`.
     #[inline(always)]
     fn fat_box(
         velocity_steps: f32,
@@ -565,7 +577,28 @@ impl CanopyBroadPhase {
             let d = rb.linvel() * (params.dt * velocity_steps);
             [d.x, d.y, d.z]
         });
-        BoxLanes::load(tight).fattened(margin, d)
+        let fat = BoxLanes::load(tight).fattened(margin, d);
+        if fat.is_valid() {
+            fat
+        } else {
+            Self::finite_fat_box(tight, fat)
+        }
+    }
+
+    /// `fat_box` where the fat box is not valid. If the exact box is valid, only an overflow
+    /// made it so (the margin is at least 0, possibly infinite, and only finite stretches are
+    /// added: no NaN, and the sides stay ordered), and each infinite side stops at
+    /// `±f32::MAX`: the box still holds the exact box, and the collider is not taken for an
+    /// invalid one. Otherwise the box is left invalid.
+    #[cold]
+    #[inline(never)]
+    fn finite_fat_box(tight: &Aabb, fat: BoxLanes) -> BoxLanes {
+        if !tight.is_valid() {
+            return fat;
+        }
+        let fat = fat.to_aabb();
+        let clamp = |p: Point<f32>| p.map(|x| x.clamp(-f32::MAX, f32::MAX));
+        BoxLanes::load(&Aabb::new(clamp(fat.min), clamp(fat.max)))
     }
 
     /// Step 2 for one collider: the fast path here, everything else in `examine_full`. On the

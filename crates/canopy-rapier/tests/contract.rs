@@ -159,6 +159,113 @@ impl BroadPhase for Checked {
     }
 }
 
+#[test]
+fn huge_margins_keep_every_collider() {
+    // Margins and velocity stretches the configuration accepts (finite) but whose fat boxes
+    // overflow `f32` once scaled by the length unit or added to a box: the fat box stops at
+    // `f32::MAX` instead of becoming infinite, so no collider is taken for invalid and no
+    // pair is lost.
+    let mut rng = Rng(4242);
+    let sim = new_sim(&mut rng, 80);
+    let all: Vec<ColliderHandle> = sim.colliders.iter().map(|(h, _)| h).collect();
+    let configs = [
+        (1.0e38, 0.0, 6.0, 10.0),
+        (f32::MAX, 0.0, 6.0, 1.0),
+        (0.1, f32::MAX, 6.0, 1.0),
+        (0.1, 1.0e38, 6.0, 10.0),
+        (0.1, 0.0, f32::MAX, 1.0),
+        (f32::MAX, f32::MAX, f32::MAX, f32::MAX),
+    ];
+    for (margin, fixed_margin, velocity_steps, length_unit) in configs {
+        let config = CanopyBroadPhaseConfig {
+            margin,
+            fixed_margin,
+            velocity_steps,
+            ..Default::default()
+        };
+        let params = IntegrationParameters {
+            length_unit,
+            ..Default::default()
+        };
+        let mut bp = Checked::new(config);
+        let mut events = Vec::new();
+        bp.update(&params, &sim.colliders, &sim.bodies, &all, &[], &mut events);
+        bp.update(&params, &sim.colliders, &sim.bodies, &all, &[], &mut events);
+        let what = format!("{config:?}, length unit {length_unit}");
+        let needed_valid = sim
+            .colliders
+            .iter()
+            .filter(|(_, c)| valid(&needed_box(c, params.prediction_distance() / 2.0)))
+            .count();
+        assert_eq!(
+            needed_valid,
+            all.len(),
+            "{what}: the needed boxes are finite"
+        );
+        assert_eq!(
+            bp.inner.stats().invalid,
+            0,
+            "{what}: {:?}",
+            bp.inner.stats()
+        );
+        for &h in &all {
+            let fat = bp.inner.fat_aabb(h);
+            assert!(
+                fat.is_some_and(|f| f.is_valid()),
+                "{what}: {h:?} has fat box {fat:?}"
+            );
+        }
+        // Stepped under random edits, through the sparse updates and rebuilds.
+        let mut rng = Rng(4243);
+        let mut stepped = new_sim(&mut rng, 80);
+        stepped.params.length_unit = length_unit;
+        let mut bp = Checked::new(config);
+        for _ in 0..20 {
+            for _ in 0..rng.below(3) {
+                random_edit(&mut stepped, &mut rng);
+            }
+            step(&mut stepped, &mut bp);
+        }
+        assert_eq!(
+            bp.inner.stats().invalid,
+            0,
+            "{what}: {:?}",
+            bp.inner.stats()
+        );
+        assert!(bp.checked_pairs > 0, "{what}");
+        assert!(
+            bp.violations.is_empty(),
+            "{what}: {:#?}",
+            &bp.violations[..bp.violations.len().min(10)]
+        );
+    }
+}
+
+#[test]
+fn soft_ccd_near_huge_coordinates_keeps_the_pair() {
+    // A soft-CCD body near `f32::MAX` whose reach (`|v| dt`) carries its box past it: the box
+    // stops at `f32::MAX`, and the body keeps its pair with a fixed ball at the same place.
+    let mut bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let at = vector![3.4e38, 0.0, 0.0];
+    let fixed = colliders.insert(ColliderBuilder::ball(0.5).translation(at));
+    let body = bodies.insert(
+        RigidBodyBuilder::dynamic()
+            .translation(at)
+            .linvel(vector![1.0e38, 0.0, 0.0])
+            .soft_ccd_prediction(f32::MAX),
+    );
+    let fast = colliders.insert_with_parent(ColliderBuilder::ball(0.5), body, &mut bodies);
+    let all = [fixed, fast];
+    let params = IntegrationParameters::default();
+    let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
+    bp.update(&params, &colliders, &bodies, &all, &[], &mut Vec::new());
+    assert_eq!(bp.inner.stats().invalid, 0, "{:?}", bp.inner.stats());
+    assert!(bp.inner.contains_pair(fixed, fast));
+    assert!(bp.checked_pairs > 0);
+    assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+}
+
 /// Small deterministic PRNG for world generation and edits.
 struct Rng(u64);
 impl Rng {
