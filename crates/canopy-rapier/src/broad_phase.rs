@@ -1417,10 +1417,17 @@ impl BroadPhase for CanopyBroadPhase {
                     &mut generations[index]
                 }
             };
-            *slot = generation;
             if let Some(w) = bits.get_mut(word) {
-                *w |= 1 << (index % 64);
+                let bit = 1 << (index % 64);
+                // Two handles listed at one index (a stale one beside the collider that
+                // reused its index): the live collider's handle is the one examined, whatever
+                // the order.
+                if *w & bit != 0 && *slot != generation && !colliders.contains(*h) {
+                    continue;
+                }
+                *w |= bit;
             }
+            *slot = generation;
         }
         // The bitmap stays set until step 6 has read it. Where shapes are scattered over the
         // heap, the loop asks for the shape `SHAPE_AHEAD` colliders ahead (`shape_queue`: the

@@ -266,6 +266,53 @@ fn soft_ccd_near_huge_coordinates_keeps_the_pair() {
     assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
 }
 
+#[test]
+fn stale_handles_beside_their_successors_hide_nothing() {
+    // A removed collider's handle listed as modified together with the collider that reused
+    // its index, in either order: the live collider is examined and gets its pair.
+    for stale_last in [false, true] {
+        let mut bodies = RigidBodySet::new();
+        let mut colliders = ColliderSet::new();
+        let mut islands = IslandManager::new();
+        let params = IntegrationParameters::default();
+        let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
+        let old = colliders.insert(ColliderBuilder::ball(0.5).translation(vector![9.0, 0.0, 0.0]));
+        let body = bodies.insert(RigidBodyBuilder::dynamic());
+        let other = colliders.insert_with_parent(ColliderBuilder::ball(0.5), body, &mut bodies);
+        bp.update(
+            &params,
+            &colliders,
+            &bodies,
+            &[old, other],
+            &[],
+            &mut Vec::new(),
+        );
+        assert!(!bp.inner.contains_pair(old, other));
+        colliders.remove(old, &mut islands, &mut bodies, false);
+        let new = colliders.insert(ColliderBuilder::ball(0.5).translation(vector![0.5, 0.0, 0.0]));
+        assert_eq!(
+            new.into_raw_parts().0,
+            old.into_raw_parts().0,
+            "the index is reused"
+        );
+        let modified = if stale_last { [new, old] } else { [old, new] };
+        bp.update(
+            &params,
+            &colliders,
+            &bodies,
+            &modified,
+            &[old],
+            &mut Vec::new(),
+        );
+        assert!(
+            bp.inner.contains_pair(new, other),
+            "stale handle last: {stale_last}"
+        );
+        assert!(bp.checked_pairs > 0);
+        assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+    }
+}
+
 /// Small deterministic PRNG for world generation and edits.
 struct Rng(u64);
 impl Rng {
