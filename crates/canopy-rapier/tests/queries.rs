@@ -773,3 +773,111 @@ fn rays_without_a_direction_hit_only_where_they_start() {
         }
     }
 }
+
+/// Shape casts against a heightfield with no time limit (`Real::MAX`), a huge velocity, or a
+/// negative or NaN target distance. Parry's heightfield cast walks the cells under the motion
+/// until one lies past the time limit, so without a limit it never stopped once the motion
+/// left the heightfield on one axis only (Rapier's own pipeline hangs the same way), and it
+/// panics on a negative or NaN target distance ("the loosening margin must be positive"). The
+/// truth is parry's own cast between the two shapes with a long but finite time limit, with a
+/// negative target distance counted as 0; a NaN one is answered with `None`. The casts run on
+/// another thread, so that a regression fails here instead of hanging the test run.
+#[test]
+fn shape_casts_against_a_heightfield_return() {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let bodies = RigidBodySet::new();
+        let mut colliders = ColliderSet::new();
+        let heights = DMatrix::from_fn(20, 20, |i, j| ((i * 7 + j * 3) % 5) as f32 * 0.01);
+        let ground = colliders.insert(ColliderBuilder::heightfield(
+            heights,
+            vector![1000.0, 1.0, 1000.0],
+        ));
+        let narrow = NarrowPhase::new();
+        let mut canopy = CanopyBroadPhase::new();
+        let params = IntegrationParameters::default();
+        canopy.update(
+            &params,
+            &colliders,
+            &bodies,
+            &[ground],
+            &[],
+            &mut Vec::new(),
+        );
+        let q = canopy.scene_queries(
+            narrow.query_dispatcher(),
+            &bodies,
+            &colliders,
+            QueryFilter::default(),
+        );
+        let ball = Ball::new(0.5);
+        let start = Isometry::translation(0.0, 0.7, 0.0);
+        let options = |max_time_of_impact, target_distance| ShapeCastOptions {
+            max_time_of_impact,
+            target_distance,
+            ..Default::default()
+        };
+        let cast = |vel: Vector<Real>, max_toi: Real, target_distance: Real| {
+            q.cast_shape(&start, &vel, &ball, options(max_toi, target_distance))
+                .map(|(h, hit)| (h, hit.time_of_impact))
+        };
+        let truth = |vel: Vector<Real>, max_toi: Real, target_distance: Real| {
+            let c = &colliders[ground];
+            rapier3d::parry::query::cast_shapes(
+                c.position(),
+                &Vector::zeros(),
+                c.shape(),
+                &start,
+                &vel,
+                &ball,
+                options(max_toi, target_distance),
+            )
+            .unwrap()
+            .map(|hit| (ground, hit.time_of_impact))
+        };
+        // Slowly down, quickly along z: the ball lands at about t = 160 to 200 (z = 160 to
+        // 200) and the motion then leaves the heightfield along z only.
+        let slant = vector![0.0, -1.0e-3, 1.0];
+        let fast = slant * 1.0e35;
+        let answers = vec![
+            (cast(slant, Real::MAX, 0.0), truth(slant, 1.0e4, 0.0)),
+            (cast(fast, Real::MAX, 0.0), truth(fast, 1.0e-31, 0.0)),
+            (cast(slant, Real::MAX, -0.25), truth(slant, 1.0e4, 0.0)),
+            (cast(slant, 1.0e4, -0.25), truth(slant, 1.0e4, 0.0)),
+            (cast(slant, 1.0e4, f32::NAN), None),
+            (cast(slant, Real::MAX, 0.1), truth(slant, 1.0e4, 0.1)),
+            (cast(-slant, Real::MAX, 0.0), truth(-slant, 1.0e4, 0.0)),
+            // Any target distance past the farthest points of the two boxes at time 0 hits
+            // at time 0.
+            (
+                cast(slant, Real::MAX, f32::INFINITY),
+                truth(slant, 1.0, 2000.0),
+            ),
+            (cast(slant, Real::MAX, f32::MAX), truth(slant, 1.0, 2000.0)),
+            (cast(slant, 1.0, 1.0e30), truth(slant, 1.0, 2000.0)),
+        ];
+        let _ = tx.send(answers);
+    });
+    let answers = rx.recv_timeout(std::time::Duration::from_secs(20));
+    let answers = answers.expect("the shape casts did not return");
+    assert!(
+        answers[0]
+            .1
+            .is_some_and(|(_, t)| (150.0..=200.0).contains(&t)),
+        "{:?}",
+        answers[0]
+    );
+    for (k, (canopy, truth)) in answers.into_iter().enumerate() {
+        // Every cast but the one with a NaN target distance and the one moving up hits the
+        // ground.
+        assert_eq!(truth.is_some(), k != 4 && k != 6, "cast {k}: {truth:?}");
+        if k >= 7 {
+            assert_eq!(truth.map(|(_, t)| t), Some(0.0), "cast {k}");
+        }
+        let same = match (canopy, truth) {
+            (Some((h1, t1)), Some((h2, t2))) => h1 == h2 && (t1 - t2).abs() <= 1.0e-3 * t2,
+            (a, b) => a == b,
+        };
+        assert!(same, "cast {k}: {canopy:?} against {truth:?}");
+    }
+}

@@ -4,10 +4,36 @@
 use super::{finite, valid_pose, SceneQueries};
 use canopy_core::Aabb;
 use rapier3d::parry::query::ShapeCastOptions;
-use rapier3d::prelude::{Collider, ColliderHandle, Isometry, Real, Shape, ShapeCastHit, Vector};
+use rapier3d::prelude::{
+    Collider, ColliderHandle, Isometry, Point, Real, Shape, ShapeCastHit, Vector,
+};
 
 fn to_canopy(aabb: &rapier3d::prelude::Aabb) -> Aabb {
     Aabb::new(aabb.mins, aabb.maxs)
+}
+
+/// The relative room given to a collider's exit time before a cast against it stops: far
+/// more than the rounding of the exit time, which is a few units in the last place.
+const EXIT_SLACK: Real = 1.0e-3;
+
+/// The times in `[0, max_toi]` during which the point `origin + t * vel` lies in `b` (the
+/// slab test of `canopy_core::Ray::intersect_aabb`, which drops a NaN from `0 * inf` the same
+/// way), or `None` when it never does. The exit is `max_toi` where the motion stays inside.
+fn entry_and_exit(
+    origin: &Point<Real>,
+    vel: &Vector<Real>,
+    b: &Aabb,
+    max_toi: Real,
+) -> Option<(Real, Real)> {
+    let (mut t0, mut t1): (Real, Real) = (0.0, max_toi);
+    for i in 0..3 {
+        let inv = 1.0 / vel[i];
+        let a = (b.min[i] - origin[i]) * inv;
+        let c = (b.max[i] - origin[i]) * inv;
+        t0 = t0.max(a.min(c));
+        t1 = t1.min(a.max(c));
+    }
+    (t0 <= t1).then_some((t0, t1))
 }
 
 impl<'a> SceneQueries<'a> {
@@ -15,6 +41,13 @@ impl<'a> SceneQueries<'a> {
     /// as Rapier's `QueryPipeline::cast_shape` (witness and normal 1 on the collider, in world
     /// space). Colliders whose boxes the swept box meets are tested in the order the moving box
     /// reaches them, stopping once the next one is reached after the best hit.
+    ///
+    /// Each collider is cast against only until the moving box has left the collider's box:
+    /// no hit can come later, and parry's cast against a heightfield otherwise walks its
+    /// cells until the time limit, forever when there is none (`Real::MAX`). A negative
+    /// target distance counts as 0, as parry's casts between convex shapes take it (its
+    /// heightfield cast panics on one); a NaN one, a NaN or negative time limit, or a pose or
+    /// velocity that is not finite gives `None`.
     pub fn cast_shape(
         &self,
         shape_pos: &Isometry<Real>,
@@ -23,14 +56,22 @@ impl<'a> SceneQueries<'a> {
         options: ShapeCastOptions,
     ) -> Option<(ColliderHandle, ShapeCastHit)> {
         let max_toi = options.max_time_of_impact;
-        if !valid_pose(shape_pos) || !finite(shape_vel.iter()) || max_toi.is_nan() || max_toi < 0.0
+        if !valid_pose(shape_pos)
+            || !finite(shape_vel.iter())
+            || max_toi.is_nan()
+            || max_toi < 0.0
+            || options.target_distance.is_nan()
         {
             return None;
         }
+        let options = ShapeCastOptions {
+            target_distance: options.target_distance.max(0.0),
+            ..options
+        };
         let start = shape.compute_aabb(shape_pos);
         // The box swept over `[0, max_toi]` (a zero velocity component moves nothing, also
         // with an infinite `max_toi`), grown by the target distance.
-        let mut swept = to_canopy(&start).loosened(options.target_distance.max(0.0));
+        let mut swept = to_canopy(&start).loosened(options.target_distance);
         for i in 0..3 {
             let d = if shape_vel[i] == 0.0 {
                 0.0
@@ -48,36 +89,48 @@ impl<'a> SceneQueries<'a> {
         }
         // Entry time of the moving box into a collider box: a ray from the box centre against
         // the collider box grown by the moving box's half extents (a Minkowski sum).
-        let half = start
-            .half_extents()
-            .add_scalar(options.target_distance.max(0.0));
-        let ray = canopy_core::Ray::new(start.center(), *shape_vel);
-        let entry = |b: &Aabb| {
+        let start_box = to_canopy(&start);
+        let center = start_box.center();
+        let entry_exit = |b: &Aabb, target_distance: Real| {
+            let half = start.half_extents().add_scalar(target_distance);
             let grown = Aabb::new(b.min - half, b.max + half);
-            ray.intersect_aabb(&grown, max_toi)
+            entry_and_exit(&center, shape_vel, &grown, max_toi)
         };
-        let mut candidates: Vec<(Real, ColliderHandle, &'a Collider)> = Vec::new();
+        let mut candidates: Vec<(Real, Aabb, ColliderHandle, &'a Collider)> = Vec::new();
         self.cull_aabb(&swept, |id| {
-            if let Some(t) = entry(self.tight(id)) {
+            let b = self.tight(id);
+            if let Some((t, _)) = entry_exit(b, options.target_distance) {
                 if let Some((handle, collider)) = self.collider(id) {
-                    candidates.push((t, handle, collider));
+                    candidates.push((t, *b, handle, collider));
                 }
             }
         });
         for (handle, collider, aabb) in self.edited() {
-            if let Some(t) = entry(&aabb) {
-                candidates.push((t, handle, collider));
+            if let Some((t, _)) = entry_exit(&aabb, options.target_distance) {
+                candidates.push((t, aabb, handle, collider));
             }
         }
         candidates.sort_by(|a, b| {
             a.0.total_cmp(&b.0)
-                .then(a.1.into_raw_parts().cmp(&b.1.into_raw_parts()))
+                .then(a.2.into_raw_parts().cmp(&b.2.into_raw_parts()))
         });
         let mut best: Option<(ColliderHandle, ShapeCastHit)> = None;
-        for (t, handle, collider) in candidates {
+        for (t, b, handle, collider) in candidates {
             if best.as_ref().is_some_and(|b| t > b.1.time_of_impact) {
                 break;
             }
+            // A target distance past the farthest two points of the two boxes at time 0 gives
+            // the same answer, a hit at time 0, as that farthest distance does (and parry's
+            // heightfield cast overflows its cell indices on a huge one).
+            let farthest = b.merge(&start_box).extents().norm();
+            let target_distance = options.target_distance.min(farthest);
+            // Past the exit (with room for rounding) the boxes are apart: no hit.
+            let exit = entry_exit(&b, target_distance).map_or(max_toi, |(_, exit)| exit);
+            let options = ShapeCastOptions {
+                max_time_of_impact: max_toi.min(exit * (1.0 + EXIT_SLACK)),
+                target_distance,
+                ..options
+            };
             let pos = collider.position();
             let hit = self.dispatcher.cast_shapes(
                 &pos.inv_mul(shape_pos),
