@@ -157,7 +157,9 @@ impl Aabb {
         Aabb::new(self.min - m, self.max + m)
     }
 
-    /// Squared Euclidean distance from `p` to the box (0 inside).
+    /// Squared Euclidean distance from `p` to the box (0 inside), in `f32`: infinite where the
+    /// square passes `f32::MAX` (distances beyond about 1.8e19), which
+    /// [`distance_to_point`](Self::distance_to_point) does not do.
     #[inline]
     pub fn distance_squared_to_point(&self, p: &Point3<f32>) -> f32 {
         distance_squared(
@@ -167,10 +169,12 @@ impl Aabb {
         )
     }
 
-    /// Euclidean distance from `p` to the box (0 inside).
+    /// Euclidean distance from `p` to the box (0 inside), computed in `f64` and rounded to
+    /// `f32`: exact to rounding for any finite box and point (infinite only for a distance
+    /// past `f32::MAX`).
     #[inline]
     pub fn distance_to_point(&self, p: &Point3<f32>) -> f32 {
-        self.distance_squared_to_point(p).sqrt()
+        distance(self.min_array(), self.max_array(), p)
     }
 
     pub(crate) fn min_array(&self) -> [f32; 3] {
@@ -211,6 +215,22 @@ pub(crate) fn distance_squared(min: [f32; 3], max: [f32; 3], p: &Point3<f32>) ->
         d += v * v;
     }
     d
+}
+
+/// Euclidean distance from `p` to the box `[min, max]` on raw bounds: the differences and
+/// their squares in `f64`, so nothing overflows before the result is rounded to `f32` (in
+/// `f32`, squares overflow for distances beyond about 1.8e19). A NaN difference counts as 0,
+/// as in `distance_squared`.
+#[inline]
+pub(crate) fn distance(min: [f32; 3], max: [f32; 3], p: &Point3<f32>) -> f32 {
+    let mut d = 0.0f64;
+    for i in 0..3 {
+        let below = min[i] as f64 - p[i] as f64;
+        let above = p[i] as f64 - max[i] as f64;
+        let v = below.max(0.0).max(above);
+        d += v * v;
+    }
+    d.sqrt() as f32
 }
 
 #[cfg(test)]

@@ -686,3 +686,109 @@ fn sah_tree_is_no_worse_than_lbvh() {
     );
     assert!(sah.depth < 64 && lbvh.depth < 64);
 }
+
+/// The distance from `p` to the box, by an independent route: the nearest point of the box
+/// (`p` clamped to it, in `f64`), then the length of the difference, scaled so that no square
+/// overflows even in `f64`.
+fn reference_distance(b: &Aabb, p: &Point3<f32>) -> f64 {
+    let d: Vec<f64> = (0..3)
+        .map(|i| {
+            let q = (p[i] as f64).clamp(b.min[i] as f64, b.max[i] as f64);
+            (p[i] as f64 - q).abs()
+        })
+        .collect();
+    let scale = d.iter().cloned().fold(0.0, f64::max);
+    if scale == 0.0 {
+        return 0.0;
+    }
+    scale * d.iter().map(|x| (x / scale).powi(2)).sum::<f64>().sqrt()
+}
+
+/// A coordinate anywhere in `f32`'s range, small or huge.
+fn any_scale() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        -10.0f32..10.0,
+        -1.0e20f32..1.0e20,
+        -1.0e30f32..1.0e30,
+        -f32::MAX..f32::MAX,
+    ]
+}
+
+proptest! {
+    /// `distance_to_point` is the exact distance rounded to `f32`, for boxes and points at any
+    /// scale (squares of `f32` distances past 1.8e19 overflow; the distance must not).
+    #[test]
+    fn box_distance_is_exact_at_any_scale(
+        a in prop::array::uniform3(any_scale()),
+        b in prop::array::uniform3(any_scale()),
+        p in prop::array::uniform3(any_scale()),
+    ) {
+        let lo = [a[0].min(b[0]), a[1].min(b[1]), a[2].min(b[2])];
+        let hi = [a[0].max(b[0]), a[1].max(b[1]), a[2].max(b[2])];
+        let aabb = Aabb::from_arrays(lo, hi);
+        let p = Point3::from(p);
+        let want = reference_distance(&aabb, &p);
+        let got = aabb.distance_to_point(&p) as f64;
+        if want > f32::MAX as f64 {
+            prop_assert!(got >= f32::MAX as f64, "{} for {}", got, want);
+        } else {
+            prop_assert!((got - want).abs() <= want * 1.0e-6, "{} for {}", got, want);
+        }
+    }
+
+    /// `nearest` finds the nearest box (by the independent distance) on boxes spread over
+    /// huge ranges, where the squared distances overflow `f32`.
+    #[test]
+    fn nearest_matches_brute_force_at_huge_distances(
+        boxes in prop::collection::vec(
+            (prop::array::uniform3(-1.0e30f32..1.0e30), prop::array::uniform3(0.0f32..1.0e28)),
+            1..120,
+        ),
+        opts in options(),
+        p in prop::array::uniform3(-1.0e30f32..1.0e30),
+        limit in prop_oneof![Just(f32::INFINITY), 0.0f32..2.0e30],
+    ) {
+        let boxes: Vec<Aabb> = boxes
+            .into_iter()
+            .map(|(c, h)| Aabb::from_center_half_extents(Point3::from(c), Vector3::from(h)))
+            .collect();
+        let bvh = build_checked(&boxes, opts);
+        let p = Point3::from(p);
+        let exact = |i: u32| reference_distance(&boxes[i as usize], &p) as f32;
+        let got = bvh.nearest(&p, limit, |i, _| Some(exact(i)));
+        let brute = (0..boxes.len() as u32)
+            .map(|i| (exact(i), i))
+            .filter(|&(d, _)| d <= limit)
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        match (got, brute) {
+            (None, None) => {}
+            (Some(h), Some((d, _))) => prop_assert_eq!(h.distance, d),
+            (g, b) => prop_assert!(false, "tree {:?} vs brute force {:?}", g, b),
+        }
+    }
+}
+
+#[test]
+fn nearest_at_distances_whose_squares_overflow() {
+    // Two points on the x axis, 3e19 and 2e19 from the query point: the second is nearer,
+    // and within a limit of 2.5e19.
+    let boxes = [
+        Aabb::from_arrays([3.0e19, 0.0, 0.0], [3.0e19, 0.0, 0.0]),
+        Aabb::from_arrays([2.0e19, 0.0, 0.0], [2.0e19, 0.0, 0.0]),
+    ];
+    let p = Point3::origin();
+    assert_eq!(boxes[1].distance_to_point(&p), 2.0e19);
+    for builder in [Builder::BinnedSah, Builder::Lbvh] {
+        let bvh = Bvh::build(&boxes, BuildOptions::default().with_builder(builder)).unwrap();
+        for limit in [f32::INFINITY, 2.5e19] {
+            let hit = bvh.nearest(&p, limit, |i, _| {
+                Some(boxes[i as usize].distance_to_point(&p))
+            });
+            assert_eq!(
+                hit.map(|h| (h.primitive, h.distance)),
+                Some((1, 2.0e19)),
+                "{builder:?}, {limit}"
+            );
+        }
+    }
+}

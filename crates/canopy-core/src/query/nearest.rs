@@ -1,7 +1,7 @@
 //! Nearest-primitive query: best-first traversal ordered by the distance from the query point
 //! to node boxes, with the caller's callback giving the exact distance to a primitive.
 
-use crate::aabb::distance_squared;
+use crate::aabb::distance as box_distance;
 use crate::bvh::Bvh;
 use nalgebra::Point3;
 use std::cmp::{Ordering, Reverse};
@@ -64,7 +64,7 @@ impl Bvh {
         let mut best_d = max_distance;
         let node_dist = |i: usize| {
             let n = &self.nodes[i];
-            distance_squared(n.min, n.max, point).sqrt()
+            box_distance(n.min, n.max, point)
         };
         let mut heap = BinaryHeap::new();
         heap.push(Reverse(Entry(node_dist(0), 0)));
@@ -76,7 +76,7 @@ impl Bvh {
             if node.is_leaf() {
                 for slot in node.leaf_range() {
                     let b = &self.prim_bounds[slot];
-                    if distance_squared(b.min, b.max, point).sqrt() > best_d {
+                    if box_distance(b.min, b.max, point) > best_d {
                         continue;
                     }
                     let prim = self.prim_indices[slot];
