@@ -28,14 +28,15 @@ const PARALLEL_MIN: usize = 1 << 14;
 /// Bits per axis of the Morton codes for `n` primitives whose index takes `index_bits`: far
 /// beyond one primitive per cell for uniform input (`n^(1/3)` cells per axis) to leave room
 /// for clustered input, at least 11 (33 bits: three radix passes up to 2M primitives), capped
-/// at 21 and by what fits next to the index. Short inputs, sorted by comparison, take all the
-/// bits that fit.
+/// at 21 and by what fits next to the index (which wins over the 11: 10 bits for indices of
+/// 32 bits, more than 2^31 primitives). Short inputs, sorted by comparison, take all the bits
+/// that fit.
 fn morton_bits(n: usize, index_bits: u32) -> u32 {
     let fit = ((64 - index_bits) / 3).min(21);
     if n <= 1024 {
         fit
     } else {
-        (index_bits / 3 + 5).clamp(11, fit)
+        (index_bits / 3 + 5).max(11).min(fit)
     }
 }
 
@@ -351,6 +352,29 @@ fn xyz(v: F4) -> [f32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// For every index width up to the largest input (`u32::MAX - 1` primitives), the code
+    /// and the index fit in the 64-bit key, with at least 10 bits per axis; for more than 2^31
+    /// primitives this used to panic (`clamp` with its minimum above its maximum).
+    #[test]
+    fn morton_bits_fit_next_to_every_index_width() {
+        for index_bits in 1..=32u32 {
+            let smallest = if index_bits == 1 {
+                1
+            } else {
+                (1usize << (index_bits - 1)) + 1
+            };
+            let largest = (1usize << index_bits).min(u32::MAX as usize - 1);
+            for n in [smallest, largest] {
+                let bits = morton_bits(n, index_bits);
+                assert!(3 * bits + index_bits <= 64, "n {n}: {bits} bits per axis");
+                assert!((10..=21).contains(&bits), "n {n}: {bits} bits per axis");
+                if n > 1024 && index_bits <= 31 {
+                    assert!(bits >= 11, "n {n}: {bits} bits per axis");
+                }
+            }
+        }
+    }
 
     #[test]
     fn table_encoding_matches_morton_encode() {
