@@ -15,7 +15,10 @@ pub type TruthPair = (usize, usize, Vec<Manifold>);
 
 /// `DefaultQueryDispatcher.contact_manifolds(pose_i⁻¹·pose_j, shape_i, shape_j, prediction)`
 /// called fresh on pair `(i, j)`: its manifolds when some point is within `prediction` (see
-/// [`in_contact`]). `None` also when `i` or `j` is not an index of `objects`.
+/// [`in_contact`]). `None` also when `i` or `j` is not an index of `objects`, for a
+/// `prediction` that is negative, NaN or infinite, and for a pose that
+/// [`check_pose`](crate::check_pose) refuses (parry panics on some of these: a negative
+/// prediction against a mesh, a NaN rotation).
 pub fn pair(
     objects: &[(Isometry3<f32>, SharedShape)],
     i: usize,
@@ -24,6 +27,10 @@ pub fn pair(
 ) -> Option<Vec<Manifold>> {
     let (pose1, shape1) = objects.get(i)?;
     let (pose2, shape2) = objects.get(j)?;
+    let valid = |pose| crate::validate::check_pose(pose).is_ok();
+    if !(prediction.is_finite() && prediction >= 0.0 && valid(pose1) && valid(pose2)) {
+        return None;
+    }
     let pos12 = pose1.inv_mul(pose2);
     let mut manifolds = Vec::new();
     DefaultQueryDispatcher
@@ -156,5 +163,50 @@ mod tests {
         for (i, j) in [(0, 2), (5, 1), (2, 2), (usize::MAX, 0)] {
             assert!(pair(&objects, i, j, 0.0).is_none(), "({i}, {j})");
         }
+    }
+
+    /// A negative, NaN or infinite prediction, or a pose `check_pose` refuses, gives `None`
+    /// (parry panicked: "the loosening margin must be positive" against a mesh, and an
+    /// assertion or a subtraction overflow on a NaN rotation); the valid pairs next to them
+    /// still give parry's manifolds.
+    #[test]
+    fn invalid_predictions_and_poses_give_none() {
+        use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+        let mesh = SharedShape::trimesh(
+            vec![
+                Point3::origin(),
+                Point3::new(1.0, 0.0, 0.0),
+                Point3::new(0.0, 1.0, 0.0),
+            ],
+            vec![[0, 1, 2]],
+        )
+        .unwrap();
+        let nan_rotation = UnitQuaternion::new_unchecked(Quaternion::new(f32::NAN, 0.0, 0.0, 0.0));
+        let objects = vec![
+            (Isometry3::identity(), SharedShape::ball(1.0)),
+            (Isometry3::identity(), mesh),
+            (
+                Isometry3::from_parts(Translation3::identity(), nan_rotation),
+                SharedShape::cuboid(1.0, 1.0, 1.0),
+            ),
+            (
+                Isometry3::translation(f32::INFINITY, 0.0, 0.0),
+                SharedShape::ball(1.0),
+            ),
+        ];
+        assert!(pair(&objects, 0, 1, 0.0).is_some());
+        for prediction in [-1.0, f32::NAN, f32::INFINITY] {
+            assert!(pair(&objects, 0, 1, prediction).is_none(), "{prediction}");
+        }
+        for (i, j) in [(0, 2), (2, 1), (0, 3), (3, 2)] {
+            assert!(pair(&objects, i, j, 0.0).is_none(), "({i}, {j})");
+        }
+        // Every pair with a valid one listed, none panics.
+        let found: Vec<(usize, usize)> = contact_pairs(&objects, -1.0)
+            .into_iter()
+            .chain(par_contact_pairs(&objects, 0.0))
+            .map(|(i, j, _)| (i, j))
+            .collect();
+        assert_eq!(found, vec![(0, 1)]);
     }
 }
