@@ -43,14 +43,27 @@ impl Ray {
             && self.dir != Vector3::zeros()
     }
 
+    /// `true` when origin and direction are finite (the direction may be zero).
+    #[inline]
+    pub(crate) fn is_finite(&self) -> bool {
+        self.origin.coords.iter().all(|c| c.is_finite()) && self.dir.iter().all(|c| c.is_finite())
+    }
+
     /// Entry time of the ray into `aabb` within `[0, t_max]`, or `None` when it misses.
-    /// A ray starting inside the box enters at `t = 0`.
+    /// A ray starting inside the box enters at `t = 0`; a ray whose direction is zero enters
+    /// only a box it starts in. A ray with a NaN or infinite origin or direction, and a NaN
+    /// `t_max`, enter nothing.
     #[inline]
     pub fn intersect_aabb(&self, aabb: &Aabb, t_max: f32) -> Option<f32> {
+        if t_max.is_nan() || !self.is_finite() {
+            return None;
+        }
         self.slab(&aabb.min_array(), &aabb.max_array(), t_max)
     }
 
-    /// Slab test on raw bounds: entry time in `[0, t_max]`, or `None`.
+    /// Slab test on raw bounds: entry time in `[0, t_max]`, or `None`. An entry time that
+    /// is infinite (a zero direction component with the box on its positive side, or an
+    /// entry too far for `f32`) is no entry, also for an infinite `t_max`.
     #[inline(always)]
     pub(crate) fn slab(&self, min: &[f32; 3], max: &[f32; 3], t_max: f32) -> Option<f32> {
         let mut t0 = 0.0f32;
@@ -63,7 +76,7 @@ impl Ray {
             t0 = t0.max(a.min(b));
             t1 = t1.min(a.max(b));
         }
-        (t0 <= t1).then_some(t0)
+        (t0 <= t1 && t0 < f32::INFINITY).then_some(t0)
     }
 }
 
@@ -81,5 +94,34 @@ mod tests {
         assert_eq!(r.intersect_aabb(&b, 10.0), None);
         let inside = Ray::new(Point3::new(1.5, 0.0, 0.0), Vector3::y());
         assert_eq!(inside.intersect_aabb(&b, 10.0), Some(0.0));
+    }
+
+    /// Rays that go nowhere or are not numbers, and a NaN time limit: a zero direction enters
+    /// only the box it starts in (it used to enter, at `t = inf`, every box lying on the
+    /// positive side of its origin on each axis); a NaN or infinite origin or direction enters
+    /// nothing (it used to enter every box at `t = 0`); a NaN `t_max` enters nothing (it
+    /// used to count as infinite), as `Bvh::cast_ray` answers for it.
+    #[test]
+    fn degenerate_rays_enter_only_where_they_start() {
+        let b = Aabb::from_arrays([0.0; 3], [1.0; 3]);
+        let still = |x: f32| Ray::new(Point3::new(x, 0.5, 0.5), Vector3::zeros());
+        for t_max in [10.0, f32::INFINITY] {
+            assert_eq!(still(-5.0).intersect_aabb(&b, t_max), None);
+            assert_eq!(still(5.0).intersect_aabb(&b, t_max), None);
+            assert_eq!(still(0.5).intersect_aabb(&b, t_max), Some(0.0));
+        }
+        let x = Vector3::x();
+        for bad in [f32::NAN, f32::INFINITY, -f32::INFINITY] {
+            let origin = Ray::new(Point3::new(bad, 0.5, 0.5), x);
+            let dir = Ray::new(Point3::new(-5.0, 0.5, 0.5), Vector3::new(bad, 0.0, 0.0));
+            assert_eq!(origin.intersect_aabb(&b, f32::INFINITY), None, "{bad}");
+            assert_eq!(dir.intersect_aabb(&b, f32::INFINITY), None, "{bad}");
+        }
+        let ray = Ray::new(Point3::new(-5.0, 0.5, 0.5), x);
+        assert_eq!(ray.intersect_aabb(&b, f32::NAN), None);
+        assert_eq!(ray.intersect_aabb(&b, f32::INFINITY), Some(5.0));
+        // An entry too far for `f32` is no entry.
+        let slow = Ray::new(Point3::new(-5.0, 0.5, 0.5), Vector3::new(1.0e-38, 0.0, 0.0));
+        assert_eq!(slow.intersect_aabb(&b, f32::INFINITY), None);
     }
 }

@@ -26,7 +26,8 @@ impl Bvh {
     /// `hit(primitive, best_t)` is called for primitives whose box the ray enters before
     /// `best_t` (the closest time found so far, or `t_max`); it returns the exact time of impact
     /// with that primitive, or `None` for a miss. Its time must not be before the ray enters the
-    /// primitive's box. Hits later than `best_t` are ignored; ties keep the first found.
+    /// primitive's box. Hits later than `best_t` are ignored; ties keep the first found. A ray
+    /// with a NaN or infinite origin or direction, and a NaN or negative `t_max`, hit nothing.
     ///
     /// ```
     /// use canopy_core::{Aabb, Bvh, BuildOptions, Ray};
@@ -81,7 +82,7 @@ impl Bvh {
         mut hit: impl FnMut(u32, f32) -> Option<f32>,
     ) -> Option<RayHit> {
         let root = self.nodes.first()?;
-        if t_max.is_nan() || t_max < 0.0 {
+        if t_max.is_nan() || t_max < 0.0 || !ray.is_finite() {
             return None;
         }
         ray.slab(&root.min, &root.max, t_max)?;
@@ -496,6 +497,8 @@ impl SignedSlab4 {
     /// Entry times of the ray into the four boxes of `n` within `[0, t_max]`, and the bit mask
     /// of the boxes it enters. Same result per box as `Ray::slab`: a NaN plane time (from
     /// `0 * inf`) is dropped, since it is always the first operand of the SSE-rule min/max.
+    /// Except that an infinite entry time counts as an entry here when `t_max` is infinite:
+    /// that only costs a visit, as the primitives' `Ray::slab` test drops it.
     #[inline(always)]
     fn entries(&self, n: &Node4, t_max: f32) -> ([f32; 4], u32) {
         let mut t0 = F4::splat(0.0);
@@ -547,6 +550,44 @@ mod tests {
                 brute.is_some()
             );
         }
+    }
+
+    /// A ray with a NaN or infinite origin or direction hits nothing, even with a callback
+    /// that would report a hit (it was asked, and a NaN ray entered every box at `t = 0`); a
+    /// ray with a zero direction hits only what it starts in.
+    #[test]
+    fn rays_that_are_not_numbers_hit_nothing() {
+        let boxes = [
+            Aabb::from_arrays([0.0; 3], [1.0; 3]),
+            Aabb::from_arrays([3.0; 3], [4.0; 3]),
+        ];
+        let bvh = Bvh::build(&boxes, BuildOptions::default()).unwrap();
+        for bad in [f32::NAN, f32::INFINITY, -f32::INFINITY] {
+            for ray in [
+                Ray::new(Point3::new(bad, 0.5, 0.5), Vector3::x()),
+                Ray::new(Point3::new(-1.0, 0.5, 0.5), Vector3::new(1.0, bad, 0.0)),
+            ] {
+                assert_eq!(bvh.cast_ray(&ray, f32::INFINITY, |_, _| Some(0.0)), None);
+                assert_eq!(
+                    bvh.cast_ray_any(&ray, f32::INFINITY, |_, _| Some(0.0)),
+                    None
+                );
+            }
+        }
+        let test = |ray: Ray| {
+            bvh.cast_ray(&ray, f32::INFINITY, |i, t| {
+                ray.intersect_aabb(&boxes[i as usize], t)
+            })
+            .map(|h| (h.primitive, h.t))
+        };
+        assert_eq!(
+            test(Ray::new(Point3::new(-1.0, -1.0, -1.0), Vector3::zeros())),
+            None
+        );
+        assert_eq!(
+            test(Ray::new(Point3::new(3.5, 3.5, 3.5), Vector3::zeros())),
+            Some((1, 0.0))
+        );
     }
 
     #[test]
