@@ -44,6 +44,10 @@ struct Object {
     aabb: Aabb,
     /// Pose or vertices changed since the last update.
     dirty: bool,
+    /// A deformable mesh whose vertices changed in this update: the manifolds its pairs kept
+    /// describe the old triangles (parry's contact update would reuse them, as the relative
+    /// pose of a triangle in the mesh's frame did not change), so those pairs start afresh.
+    reshaped: bool,
 }
 
 impl Object {
@@ -268,6 +272,7 @@ impl<T> CollisionWorld<T> {
             pose,
             aabb: Aabb::new(Point3::origin(), Point3::origin()),
             dirty: true,
+            reshaped: false,
         };
         // The shape in its own frame is bounded too: a far-away shape brought back by its pose
         // would still overflow parry's local-frame arithmetic.
@@ -562,6 +567,7 @@ impl<T> CollisionWorld<T> {
                 continue;
             };
             if let (Kind::Deformable(mesh), Some(boxes)) = (&mut object.kind, boxes) {
+                object.reshaped = mesh.dirty;
                 mesh.apply_boxes(&boxes, margin)?;
             }
             object.aabb = aabb;
@@ -658,10 +664,13 @@ impl<T> CollisionWorld<T> {
                     &o1.pose,
                     &o2.pose,
                     prediction,
-                    persistent,
+                    persistent && !o1.reshaped && !o2.reshaped,
                 );
             }
         });
+        for object in self.slots.iter_mut().filter_map(|s| s.object.as_mut()) {
+            object.reshaped = false;
+        }
         for (pair, was) in pairs.iter().zip(was_touching) {
             if pair.touching && !was {
                 events.push(ContactEvent::Started(pair.object1, pair.object2));
