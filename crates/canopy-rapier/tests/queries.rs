@@ -904,3 +904,90 @@ fn shape_casts_against_a_heightfield_return() {
         assert!(same, "cast {k}: {canopy:?} against {truth:?}");
     }
 }
+
+/// Queries 1e19 or more away from colliders whose shapes are made of parts (a mesh, a
+/// heightfield, a compound). Parry squares `f32` distances, which overflow there: its
+/// projection on a composite shape then finds no part and panics (`unwrap` on `None`), and a
+/// heightfield's answers the query point itself. Such colliders are left out of point and
+/// shape-intersection queries that reach that far; nearer ones, and convex shapes at any
+/// distance, are still found, with distances computed without overflow.
+#[test]
+fn queries_far_from_composite_shapes_do_not_panic() {
+    let bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let triangle = SharedShape::trimesh(
+        vec![
+            point![0.0, 0.0, 0.0],
+            point![1.0, 0.0, 0.0],
+            point![0.0, 0.0, 1.0],
+        ],
+        vec![[0, 1, 2]],
+    )
+    .unwrap();
+    let mesh = colliders.insert(ColliderBuilder::new(triangle));
+    let heights = DMatrix::from_fn(4, 4, |i, j| (i + j) as f32 * 0.1);
+    let ground = colliders.insert(
+        ColliderBuilder::heightfield(heights, vector![4.0, 1.0, 4.0])
+            .translation(vector![0.0, -5.0, 0.0]),
+    );
+    let parts = colliders.insert(
+        ColliderBuilder::compound(vec![
+            (Isometry::identity(), SharedShape::ball(0.5)),
+            (
+                Isometry::translation(1.0, 0.0, 0.0),
+                SharedShape::cuboid(0.5, 0.5, 0.5),
+            ),
+        ])
+        .translation(vector![0.0, 5.0, 0.0]),
+    );
+    let far_ball =
+        colliders.insert(ColliderBuilder::ball(1.0).translation(vector![1.0e20, 0.0, 0.0]));
+    let all = [mesh, ground, parts, far_ball];
+    let narrow = NarrowPhase::new();
+    let mut canopy = CanopyBroadPhase::new();
+    let params = IntegrationParameters::default();
+    canopy.update(&params, &colliders, &bodies, &all, &[], &mut Vec::new());
+    let q = canopy.scene_queries(
+        narrow.query_dispatcher(),
+        &bodies,
+        &colliders,
+        QueryFilter::default(),
+    );
+    // Far from everything but the ball at 1e20: the ball is the answer (2e19 away), with or
+    // without a limit.
+    let p = point![1.2e20, 0.0, 0.0];
+    for limit in [Real::MAX, Real::INFINITY] {
+        let found = q.project_point(&p, limit, true);
+        assert_eq!(found.map(|f| f.0), Some(far_ball), "limit {limit}");
+        let d = (found.unwrap().1.point.coords.cast::<f64>() - p.coords.cast::<f64>()).norm();
+        assert!((d - 2.0e19).abs() <= 1.0e13, "{d}");
+    }
+    // Near the origin: the mesh, found as before.
+    let near = q.project_point(&point![0.2, 1.0, 0.2], Real::MAX, true);
+    assert_eq!(near.map(|f| f.0), Some(mesh));
+    // Points at every scale, far from the composite shapes: no panic, and only the ball or
+    // nothing.
+    for x in [3.0e19, 1.0e30, -3.0e38, f32::MAX] {
+        for p in [point![x, 0.0, 0.0], point![0.0, x, 0.0], point![x, -x, x]] {
+            let found = q.project_point(&p, Real::INFINITY, true).map(|f| f.0);
+            assert!(
+                found.is_none() || found == Some(far_ball),
+                "{p:?}: {found:?}"
+            );
+            assert_eq!(q.intersect_point(p).count(), 0, "{p:?}");
+        }
+    }
+    // A huge ball whose box reaches the composite shapes from 1e30 away.
+    let huge = Ball::new(1.0e30);
+    let met: Vec<ColliderHandle> = q
+        .intersect_shape(Isometry::translation(1.0e30, 0.0, 0.0), &huge)
+        .map(|(h, _)| h)
+        .collect();
+    assert!(met.iter().all(|&h| h == far_ball), "{met:?}");
+    // Near shapes are still met.
+    let met: Vec<ColliderHandle> = q
+        .intersect_shape(Isometry::translation(0.2, 0.0, 0.2), &Ball::new(0.3))
+        .map(|(h, _)| h)
+        .collect();
+    assert_eq!(met, vec![mesh]);
+}

@@ -22,7 +22,7 @@ use crate::filter::Mobility;
 use canopy_core::Aabb;
 use rapier3d::parry::query::QueryDispatcher;
 use rapier3d::prelude::{
-    Collider, ColliderHandle, ColliderSet, Isometry, QueryFilter, Ray, Real, RigidBodySet,
+    Collider, ColliderHandle, ColliderSet, Isometry, QueryFilter, Ray, Real, RigidBodySet, Shape,
 };
 
 /// `true` when every coordinate is finite.
@@ -39,6 +39,39 @@ pub(crate) fn valid_ray(ray: &Ray, max_toi: Real) -> bool {
 /// `true` for a pose with a finite translation and rotation.
 pub(crate) fn valid_pose(pose: &Isometry<Real>) -> bool {
     finite(pose.translation.vector.iter()) && finite(pose.rotation.coords.iter())
+}
+
+/// The distance beyond which parry's point projection on a shape made of parts is not to be
+/// trusted: it squares `f32` distances (three of them summed), which overflow past about
+/// 1.8e19 (1e19 leaves room for the sum). Its projection on a mesh, polyline or compound then
+/// finds no part and panics (`unwrap` on `None`), and a heightfield's answers the query point
+/// itself.
+const PARTS_REACH: f64 = 1.0e19;
+
+/// `true` when `shape` is made of parts (a mesh, polyline, compound, heightfield or voxels)
+/// and some point of `query` lies farther than [`PARTS_REACH`] from some point of `shape_box`
+/// (the farthest two points of the two boxes, in `f64`): parry's exact queries between them
+/// may overflow, so such a shape is left out.
+pub(crate) fn beyond_parts_reach(shape: &dyn Shape, shape_box: &Aabb, query: &Aabb) -> bool {
+    use rapier3d::parry::shape::TypedShape;
+    let parts = matches!(
+        shape.as_typed_shape(),
+        TypedShape::TriMesh(_)
+            | TypedShape::Polyline(_)
+            | TypedShape::Compound(_)
+            | TypedShape::HeightField(_)
+            | TypedShape::Voxels(_)
+    );
+    parts && {
+        let far2: f64 = (0..3)
+            .map(|i| {
+                let a = query.max[i] as f64 - shape_box.min[i] as f64;
+                let b = shape_box.max[i] as f64 - query.min[i] as f64;
+                a.abs().max(b.abs()).powi(2)
+            })
+            .sum();
+        far2.is_nan() || far2 > PARTS_REACH * PARTS_REACH
+    }
 }
 
 /// Scene queries over a [`CanopyBroadPhase`] and the sets it was last updated with, with a
@@ -162,21 +195,22 @@ impl<'a> SceneQueries<'a> {
     pub(crate) fn colliders_in_aabb(
         &self,
         aabb: &Aabb,
-        exact: impl Fn(&Collider) -> bool,
+        exact: impl Fn(&Collider, &Aabb) -> bool,
     ) -> Vec<(ColliderHandle, &'a Collider)> {
         let mut found = Vec::new();
         self.cull_aabb(aabb, |id| {
-            if !self.tight(id).intersects(aabb) {
+            let tight = self.tight(id);
+            if !tight.intersects(aabb) {
                 return;
             }
             if let Some((handle, collider)) = self.collider(id) {
-                if exact(collider) {
+                if exact(collider, tight) {
                     found.push((handle, collider));
                 }
             }
         });
         for (handle, collider, b) in self.edited() {
-            if b.intersects(aabb) && exact(collider) {
+            if b.intersects(aabb) && exact(collider, &b) {
                 found.push((handle, collider));
             }
         }

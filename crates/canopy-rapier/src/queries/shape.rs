@@ -1,7 +1,7 @@
 //! Shape queries: shape casts (first collider hit by a shape moving at constant velocity),
 //! colliders intersecting a shape, and colliders whose broadphase box meets a box.
 
-use super::{finite, valid_pose, SceneQueries};
+use super::{beyond_parts_reach, finite, valid_pose, SceneQueries};
 use canopy_core::Aabb;
 use rapier3d::parry::query::ShapeCastOptions;
 use rapier3d::prelude::{
@@ -152,7 +152,9 @@ impl<'a> SceneQueries<'a> {
     }
 
     /// Every collider intersecting `shape` at `shape_pos`, as Rapier's
-    /// `QueryPipeline::intersect_shape`.
+    /// `QueryPipeline::intersect_shape`. Where one of the two shapes is made of parts (a mesh,
+    /// heightfield or compound) and the two boxes' farthest points lie more than 1e19 apart,
+    /// the pair is left out: parry's test between them overflows `f32` (it panics).
     pub fn intersect_shape(
         &self,
         shape_pos: Isometry<Real>,
@@ -163,7 +165,12 @@ impl<'a> SceneQueries<'a> {
         }
         let aabb = to_canopy(&shape.compute_aabb(&shape_pos));
         let dispatcher = self.dispatcher;
-        let intersects = |collider: &Collider| {
+        let intersects = |collider: &Collider, collider_box: &Aabb| {
+            if beyond_parts_reach(collider.shape(), collider_box, &aabb)
+                || beyond_parts_reach(shape, &aabb, collider_box)
+            {
+                return false;
+            }
             let pos12 = shape_pos.inv_mul(collider.position());
             dispatcher.intersection_test(&pos12, shape, collider.shape()) == Ok(true)
         };
@@ -180,7 +187,7 @@ impl<'a> SceneQueries<'a> {
         &self,
         aabb: rapier3d::prelude::Aabb,
     ) -> impl Iterator<Item = (ColliderHandle, &'a Collider)> + 'a {
-        self.colliders_in_aabb(&to_canopy(&aabb), |_| true)
+        self.colliders_in_aabb(&to_canopy(&aabb), |_, _| true)
             .into_iter()
     }
 }
