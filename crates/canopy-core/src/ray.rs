@@ -51,8 +51,8 @@ impl Ray {
 
     /// Entry time of the ray into `aabb` within `[0, t_max]`, or `None` when it misses.
     /// A ray starting inside the box enters at `t = 0`; a ray whose direction is zero enters
-    /// only a box it starts in. A ray with a NaN or infinite origin or direction, and a NaN
-    /// `t_max`, enter nothing.
+    /// only a box it starts in. Nothing is entered by a ray with a NaN or infinite origin or
+    /// direction, nor with a NaN `t_max`.
     #[inline]
     pub fn intersect_aabb(&self, aabb: &Aabb, t_max: f32) -> Option<f32> {
         if t_max.is_nan() || !self.is_finite() {

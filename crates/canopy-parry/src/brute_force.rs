@@ -201,7 +201,7 @@ mod tests {
         for (i, j) in [(0, 2), (2, 1), (0, 3), (3, 2)] {
             assert!(pair(&objects, i, j, 0.0).is_none(), "({i}, {j})");
         }
-        // Every pair with a valid one listed, none panics.
+        // No pair panics, and only the valid pair is found.
         let found: Vec<(usize, usize)> = contact_pairs(&objects, -1.0)
             .into_iter()
             .chain(par_contact_pairs(&objects, 0.0))

@@ -26,8 +26,9 @@ impl Bvh {
     /// `hit(primitive, best_t)` is called for primitives whose box the ray enters before
     /// `best_t` (the closest time found so far, or `t_max`); it returns the exact time of impact
     /// with that primitive, or `None` for a miss. Its time must not be before the ray enters the
-    /// primitive's box. Hits later than `best_t` are ignored; ties keep the first found. A ray
-    /// with a NaN or infinite origin or direction, and a NaN or negative `t_max`, hit nothing.
+    /// primitive's box. Hits later than `best_t` are ignored; ties keep the first found. Nothing
+    /// is hit by a ray with a NaN or infinite origin or direction, nor with a NaN or negative
+    /// `t_max`.
     ///
     /// ```
     /// use canopy_core::{Aabb, Bvh, BuildOptions, Ray};

@@ -12,9 +12,25 @@ fn to_canopy(aabb: &rapier3d::prelude::Aabb) -> Aabb {
     Aabb::new(aabb.mins, aabb.maxs)
 }
 
-/// The relative room given to a collider's exit time before a cast against it stops: far
-/// more than the rounding of the exit time, which is a few units in the last place.
+/// The room given to a collider's box before the exit time from it is computed, relative to
+/// the box's size, and in units in the last place of its largest coordinate: far more than the
+/// rounding of the subtractions in the slab test, so that a grazing hit just before the true
+/// exit is not cut off.
 const EXIT_SLACK: Real = 1.0e-3;
+const EXIT_SLACK_ULPS: Real = 16.0;
+
+/// `b` grown by the room of [`EXIT_SLACK`] and [`EXIT_SLACK_ULPS`] (with `origin`, the moving
+/// point, among the coordinates whose rounding counts).
+fn exit_room(b: &Aabb, origin: &Point<Real>) -> Aabb {
+    let size = b.extents().max();
+    let largest = b
+        .min
+        .iter()
+        .chain(b.max.iter())
+        .chain(origin.iter())
+        .fold(0.0, |m: Real, c| m.max(c.abs()));
+    b.loosened(EXIT_SLACK * size + EXIT_SLACK_ULPS * Real::EPSILON * largest)
+}
 
 /// The times in `[0, max_toi]` during which the point `origin + t * vel` lies in `b` (the
 /// slab test of `canopy_core::Ray::intersect_aabb`, which drops a NaN from `0 * inf` the same
@@ -91,10 +107,12 @@ impl<'a> SceneQueries<'a> {
         // the collider box grown by the moving box's half extents (a Minkowski sum).
         let start_box = to_canopy(&start);
         let center = start_box.center();
-        let entry_exit = |b: &Aabb, target_distance: Real| {
+        let grown = |b: &Aabb, target_distance: Real| {
             let half = start.half_extents().add_scalar(target_distance);
-            let grown = Aabb::new(b.min - half, b.max + half);
-            entry_and_exit(&center, shape_vel, &grown, max_toi)
+            Aabb::new(b.min - half, b.max + half)
+        };
+        let entry_exit = |b: &Aabb, target_distance: Real| {
+            entry_and_exit(&center, shape_vel, &grown(b, target_distance), max_toi)
         };
         let mut candidates: Vec<(Real, Aabb, ColliderHandle, &'a Collider)> = Vec::new();
         self.cull_aabb(&swept, |id| {
@@ -125,9 +143,11 @@ impl<'a> SceneQueries<'a> {
             let farthest = b.merge(&start_box).extents().norm();
             let target_distance = options.target_distance.min(farthest);
             // Past the exit (with room for rounding) the boxes are apart: no hit.
-            let exit = entry_exit(&b, target_distance).map_or(max_toi, |(_, exit)| exit);
+            let room = exit_room(&grown(&b, target_distance), &center);
+            let exit = entry_and_exit(&center, shape_vel, &room, max_toi)
+                .map_or(max_toi, |(_, exit)| exit);
             let options = ShapeCastOptions {
-                max_time_of_impact: max_toi.min(exit * (1.0 + EXIT_SLACK)),
+                max_time_of_impact: max_toi.min(exit),
                 target_distance,
                 ..options
             };
