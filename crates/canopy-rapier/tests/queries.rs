@@ -991,3 +991,74 @@ fn queries_far_from_composite_shapes_do_not_panic() {
         .collect();
     assert_eq!(met, vec![mesh]);
 }
+
+/// Shape casts whose target distance exceeds the shapes' starting gap: parry's answers there
+/// change erratically with the distance (a hit at once for one value, none for the next), so
+/// canopy must pass the caller's distance through unchanged, as Rapier does, and answer what
+/// parry's own cast gives on each collider (the truth: the earliest of parry's `cast_shapes`
+/// over all colliders, with the same options).
+#[test]
+fn large_target_distances_reach_parry_unchanged() {
+    let bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let near = colliders.insert(ColliderBuilder::ball(0.5));
+    let far = colliders.insert(ColliderBuilder::ball(0.1).translation(vector![50.0, 50.0, 50.0]));
+    let narrow = NarrowPhase::new();
+    let mut canopy = CanopyBroadPhase::new();
+    let params = IntegrationParameters::default();
+    canopy.update(
+        &params,
+        &colliders,
+        &bodies,
+        &[near, far],
+        &[],
+        &mut Vec::new(),
+    );
+    let q = canopy.scene_queries(
+        narrow.query_dispatcher(),
+        &bodies,
+        &colliders,
+        QueryFilter::default(),
+    );
+    let cube = Cuboid::new(vector![0.5, 0.5, 0.5]);
+    let start = Isometry::translation(0.0, 0.5, 0.0);
+    let vel = vector![0.0, 1.0, 0.0];
+    for target_distance in [0.0, 20.0, 84.0, 85.0, 86.0, 87.3, 200.0, 500.0, 1000.0] {
+        for stop_at_penetration in [false, true] {
+            let options = ShapeCastOptions {
+                max_time_of_impact: 100.0,
+                target_distance,
+                stop_at_penetration,
+                compute_impact_geometry_on_penetration: true,
+            };
+            let truth = [near, far]
+                .into_iter()
+                .filter_map(|h| {
+                    let c = &colliders[h];
+                    rapier3d::parry::query::cast_shapes(
+                        c.position(),
+                        &Vector::zeros(),
+                        c.shape(),
+                        &start,
+                        &vel,
+                        &cube,
+                        options,
+                    )
+                    .unwrap()
+                    .map(|hit| (h, hit.time_of_impact))
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            let got = q
+                .cast_shape(&start, &vel, &cube, options)
+                .map(|(h, hit)| (h, hit.time_of_impact));
+            let same = match (got, truth) {
+                (Some((h1, t1)), Some((h2, t2))) => h1 == h2 && (t1 - t2).abs() <= TOL,
+                (a, b) => a == b,
+            };
+            assert!(
+                same,
+                "target distance {target_distance}, stop {stop_at_penetration}: {got:?} against {truth:?}"
+            );
+        }
+    }
+}

@@ -4,6 +4,7 @@
 use super::{beyond_parts_reach, finite, valid_pose, SceneQueries};
 use canopy_core::Aabb;
 use rapier3d::parry::query::ShapeCastOptions;
+use rapier3d::parry::shape::TypedShape;
 use rapier3d::prelude::{
     Collider, ColliderHandle, Isometry, Point, Real, Shape, ShapeCastHit, Vector,
 };
@@ -62,8 +63,9 @@ impl<'a> SceneQueries<'a> {
     /// no hit can come later, and parry's cast against a heightfield otherwise walks its
     /// cells until the time limit, forever when there is none (`Real::MAX`). A negative
     /// target distance counts as 0, as parry's casts between convex shapes take it (its
-    /// heightfield cast panics on one); a NaN one, a NaN or negative time limit, or a pose or
-    /// velocity that is not finite gives `None`.
+    /// heightfield cast panics on one), and against a heightfield one past the two boxes'
+    /// farthest points is cut to that distance (a hit at time 0 either way); a NaN one, a NaN
+    /// or negative time limit, or a pose or velocity that is not finite gives `None`.
     pub fn cast_shape(
         &self,
         shape_pos: &Isometry<Real>,
@@ -137,11 +139,19 @@ impl<'a> SceneQueries<'a> {
             if best.as_ref().is_some_and(|b| t > b.1.time_of_impact) {
                 break;
             }
-            // A target distance past the farthest two points of the two boxes at time 0 gives
-            // the same answer, a hit at time 0, as that farthest distance does (and parry's
-            // heightfield cast overflows its cell indices on a huge one).
-            let farthest = b.merge(&start_box).extents().norm();
-            let target_distance = options.target_distance.min(farthest);
+            // Against a heightfield, a target distance past the farthest two points of the two
+            // boxes at time 0 is cut to that distance: either gives a hit at time 0, and parry's
+            // heightfield cast overflows its cell indices on a huge one. Other shapes get the
+            // caller's distance, as in Rapier (parry's answers there, with the shapes already
+            // within the distance, change with it: a cut would change them too).
+            let heightfield =
+                |s: &dyn Shape| matches!(s.as_typed_shape(), TypedShape::HeightField(_));
+            let target_distance = if heightfield(collider.shape()) || heightfield(shape) {
+                let farthest = b.merge(&start_box).extents().norm();
+                options.target_distance.min(farthest)
+            } else {
+                options.target_distance
+            };
             // Past the exit (with room for rounding) the boxes are apart: no hit.
             let room = exit_room(&grown(&b, target_distance), &center);
             let exit = entry_and_exit(&center, shape_vel, &room, max_toi)
