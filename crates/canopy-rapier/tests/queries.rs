@@ -545,6 +545,16 @@ proptest! {
     }
 }
 
+/// A broadphase over every collider of `colliders`: one update that lists them all as
+/// modified, with default integration parameters.
+fn broad_phase_over(colliders: &ColliderSet, bodies: &RigidBodySet) -> CanopyBroadPhase {
+    let all: Vec<ColliderHandle> = colliders.iter().map(|(h, _)| h).collect();
+    let mut canopy = CanopyBroadPhase::new();
+    let params = IntegrationParameters::default();
+    canopy.update(&params, colliders, bodies, &all, &[], &mut Vec::new());
+    canopy
+}
+
 #[test]
 fn empty_world_answers_nothing() {
     let bodies = RigidBodySet::new();
@@ -750,9 +760,7 @@ fn rays_without_a_direction_hit_only_where_they_start() {
     let bodies = RigidBodySet::new();
     let mut colliders = ColliderSet::new();
     let cube = colliders.insert(ColliderBuilder::cuboid(1.0, 1.0, 1.0));
-    let mut canopy = CanopyBroadPhase::new();
-    let params = IntegrationParameters::default();
-    canopy.update(&params, &colliders, &bodies, &[cube], &[], &mut Vec::new());
+    let canopy = broad_phase_over(&colliders, &bodies);
     let narrow = NarrowPhase::new();
     let q = canopy.scene_queries(
         narrow.query_dispatcher(),
@@ -817,16 +825,7 @@ fn shape_casts_against_a_heightfield_return() {
             vector![1000.0, 1.0, 1000.0],
         ));
         let narrow = NarrowPhase::new();
-        let mut canopy = CanopyBroadPhase::new();
-        let params = IntegrationParameters::default();
-        canopy.update(
-            &params,
-            &colliders,
-            &bodies,
-            &[ground],
-            &[],
-            &mut Vec::new(),
-        );
+        let canopy = broad_phase_over(&colliders, &bodies);
         let q = canopy.scene_queries(
             narrow.query_dispatcher(),
             &bodies,
@@ -926,11 +925,11 @@ fn queries_far_from_composite_shapes_do_not_panic() {
     .unwrap();
     let mesh = colliders.insert(ColliderBuilder::new(triangle));
     let heights = DMatrix::from_fn(4, 4, |i, j| (i + j) as f32 * 0.1);
-    let ground = colliders.insert(
+    colliders.insert(
         ColliderBuilder::heightfield(heights, vector![4.0, 1.0, 4.0])
             .translation(vector![0.0, -5.0, 0.0]),
     );
-    let parts = colliders.insert(
+    colliders.insert(
         ColliderBuilder::compound(vec![
             (Isometry::identity(), SharedShape::ball(0.5)),
             (
@@ -942,11 +941,8 @@ fn queries_far_from_composite_shapes_do_not_panic() {
     );
     let far_ball =
         colliders.insert(ColliderBuilder::ball(1.0).translation(vector![1.0e20, 0.0, 0.0]));
-    let all = [mesh, ground, parts, far_ball];
     let narrow = NarrowPhase::new();
-    let mut canopy = CanopyBroadPhase::new();
-    let params = IntegrationParameters::default();
-    canopy.update(&params, &colliders, &bodies, &all, &[], &mut Vec::new());
+    let canopy = broad_phase_over(&colliders, &bodies);
     let q = canopy.scene_queries(
         narrow.query_dispatcher(),
         &bodies,
@@ -1004,16 +1000,7 @@ fn large_target_distances_reach_parry_unchanged() {
     let near = colliders.insert(ColliderBuilder::ball(0.5));
     let far = colliders.insert(ColliderBuilder::ball(0.1).translation(vector![50.0, 50.0, 50.0]));
     let narrow = NarrowPhase::new();
-    let mut canopy = CanopyBroadPhase::new();
-    let params = IntegrationParameters::default();
-    canopy.update(
-        &params,
-        &colliders,
-        &bodies,
-        &[near, far],
-        &[],
-        &mut Vec::new(),
-    );
+    let canopy = broad_phase_over(&colliders, &bodies);
     let q = canopy.scene_queries(
         narrow.query_dispatcher(),
         &bodies,
