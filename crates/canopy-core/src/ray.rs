@@ -55,10 +55,18 @@ impl Ray {
     /// direction, nor with a NaN `t_max`.
     #[inline]
     pub fn intersect_aabb(&self, aabb: &Aabb, t_max: f32) -> Option<f32> {
+        self.clip_aabb(aabb, t_max).map(|(entry, _)| entry)
+    }
+
+    /// Entry and exit times of the ray in `aabb` within `[0, t_max]` (the exit is `t_max`
+    /// where the ray is still inside then), or `None` when it misses: the same test as
+    /// [`intersect_aabb`](Self::intersect_aabb), which gives the entry.
+    #[inline]
+    pub fn clip_aabb(&self, aabb: &Aabb, t_max: f32) -> Option<(f32, f32)> {
         if t_max.is_nan() || !self.is_finite() {
             return None;
         }
-        self.slab(&aabb.min_array(), &aabb.max_array(), t_max)
+        self.slab_interval(&aabb.min_array(), &aabb.max_array(), t_max)
     }
 
     /// Slab test on raw bounds: entry time in `[0, t_max]`, or `None`. An entry time that
@@ -66,6 +74,12 @@ impl Ray {
     /// entry too far for `f32`) is no entry, also for an infinite `t_max`.
     #[inline(always)]
     pub(crate) fn slab(&self, min: &[f32; 3], max: &[f32; 3], t_max: f32) -> Option<f32> {
+        self.slab_interval(min, max, t_max).map(|(entry, _)| entry)
+    }
+
+    /// [`Ray::slab`] with the exit time too.
+    #[inline(always)]
+    fn slab_interval(&self, min: &[f32; 3], max: &[f32; 3], t_max: f32) -> Option<(f32, f32)> {
         let mut t0 = 0.0f32;
         let mut t1 = t_max;
         for i in 0..3 {
@@ -76,7 +90,7 @@ impl Ray {
             t0 = t0.max(a.min(b));
             t1 = t1.min(a.max(b));
         }
-        (t0 <= t1 && t0 < f32::INFINITY).then_some(t0)
+        (t0 <= t1 && t0 < f32::INFINITY).then_some((t0, t1))
     }
 }
 
@@ -94,6 +108,25 @@ mod tests {
         assert_eq!(r.intersect_aabb(&b, 10.0), None);
         let inside = Ray::new(Point3::new(1.5, 0.0, 0.0), Vector3::y());
         assert_eq!(inside.intersect_aabb(&b, 10.0), Some(0.0));
+    }
+
+    /// `clip_aabb` gives the entry of `intersect_aabb` and the exit, capped at `t_max`.
+    #[test]
+    fn clip_gives_entry_and_exit() {
+        let b = Aabb::from_arrays([1.0, -1.0, -1.0], [2.0, 1.0, 1.0]);
+        let r = Ray::new(Point3::origin(), Vector3::x());
+        assert_eq!(r.clip_aabb(&b, 10.0), Some((1.0, 2.0)));
+        assert_eq!(r.clip_aabb(&b, 1.5), Some((1.0, 1.5)));
+        assert_eq!(r.clip_aabb(&b, 0.5), None);
+        let inside = Ray::new(Point3::new(1.5, 0.0, 0.0), Vector3::new(0.0, 2.0, 0.0));
+        assert_eq!(inside.clip_aabb(&b, 10.0), Some((0.0, 0.5)));
+        let still = Ray::new(Point3::new(1.5, 0.0, 0.0), Vector3::zeros());
+        assert_eq!(
+            still.clip_aabb(&b, f32::INFINITY),
+            Some((0.0, f32::INFINITY))
+        );
+        let nan = Ray::new(Point3::new(f32::NAN, 0.0, 0.0), Vector3::x());
+        assert_eq!(nan.clip_aabb(&b, 10.0), None);
     }
 
     /// Rays that go nowhere or are not numbers, and a NaN time limit: a zero direction enters

@@ -33,26 +33,6 @@ fn exit_room(b: &Aabb, origin: &Point<Real>) -> Aabb {
     b.loosened(EXIT_SLACK * size + EXIT_SLACK_ULPS * Real::EPSILON * largest)
 }
 
-/// The times in `[0, max_toi]` during which the point `origin + t * vel` lies in `b` (the
-/// slab test of `canopy_core::Ray::intersect_aabb`, which drops a NaN from `0 * inf` the same
-/// way), or `None` when it never does. The exit is `max_toi` where the motion stays inside.
-fn entry_and_exit(
-    origin: &Point<Real>,
-    vel: &Vector<Real>,
-    b: &Aabb,
-    max_toi: Real,
-) -> Option<(Real, Real)> {
-    let (mut t0, mut t1): (Real, Real) = (0.0, max_toi);
-    for i in 0..3 {
-        let inv = 1.0 / vel[i];
-        let a = (b.min[i] - origin[i]) * inv;
-        let c = (b.max[i] - origin[i]) * inv;
-        t0 = t0.max(a.min(c));
-        t1 = t1.min(a.max(c));
-    }
-    (t0 <= t1).then_some((t0, t1))
-}
-
 impl<'a> SceneQueries<'a> {
     /// The first collider hit by `shape`, starting at `shape_pos` and moving at `shape_vel`,
     /// as Rapier's `QueryPipeline::cast_shape` (witness and normal 1 on the collider, in world
@@ -109,13 +89,13 @@ impl<'a> SceneQueries<'a> {
         // the collider box grown by the moving box's half extents (a Minkowski sum).
         let start_box = to_canopy(&start);
         let center = start_box.center();
+        let ray = canopy_core::Ray::new(center, *shape_vel);
         let grown = |b: &Aabb, target_distance: Real| {
             let half = start.half_extents().add_scalar(target_distance);
             Aabb::new(b.min - half, b.max + half)
         };
-        let entry_exit = |b: &Aabb, target_distance: Real| {
-            entry_and_exit(&center, shape_vel, &grown(b, target_distance), max_toi)
-        };
+        let entry_exit =
+            |b: &Aabb, target_distance: Real| ray.clip_aabb(&grown(b, target_distance), max_toi);
         let mut candidates: Vec<(Real, Aabb, ColliderHandle, &'a Collider)> = Vec::new();
         self.cull_aabb(&swept, |id| {
             let b = self.tight(id);
@@ -154,7 +134,8 @@ impl<'a> SceneQueries<'a> {
             };
             // Past the exit (with room for rounding) the boxes are apart: no hit.
             let room = exit_room(&grown(&b, target_distance), &center);
-            let exit = entry_and_exit(&center, shape_vel, &room, max_toi)
+            let exit = ray
+                .clip_aabb(&room, max_toi)
                 .map_or(max_toi, |(_, exit)| exit);
             let options = ShapeCastOptions {
                 max_time_of_impact: max_toi.min(exit),
