@@ -44,6 +44,13 @@ use rapier3d::prelude::*;
 /// not colliders: no counter in the loop.
 const REFATTEN_WORDS: usize = 4;
 
+/// `b` with each infinite coordinate at `±f32::MAX` (a NaN stays NaN): for a box that only
+/// overflow made infinite, the largest finite box holding what it held.
+fn clamped_to_finite(b: &Aabb) -> Aabb {
+    let clamp = |p: Point<f32>| p.map(|x| x.clamp(-f32::MAX, f32::MAX));
+    Aabb::new(clamp(b.min), clamp(b.max))
+}
+
 /// The address of the last byte of `rb`: Rapier's `RigidBody` keeps its one-byte fields (body
 /// type, dominance, enabled) at its end, on another line than the fields the collision box
 /// reads. Only a prefetch hint: where that layout differs, the body type is read as before,
@@ -486,11 +493,7 @@ impl CanopyBroadPhase {
                 if finite {
                     // A finite box loosened past `f32::MAX` (a huge reach near huge
                     // coordinates) stops there rather than becoming invalid.
-                    let clamp = |p: Point<f32>| p.map(|x| x.clamp(-f32::MAX, f32::MAX));
-                    aabb = rapier3d::parry::bounding_volume::Aabb::new(
-                        clamp(aabb.mins),
-                        clamp(aabb.maxs),
-                    );
+                    return clamped_to_finite(&Aabb::new(aabb.mins, aabb.maxs));
                 }
             }
         }
@@ -596,9 +599,7 @@ impl CanopyBroadPhase {
         if !tight.is_valid() {
             return fat;
         }
-        let fat = fat.to_aabb();
-        let clamp = |p: Point<f32>| p.map(|x| x.clamp(-f32::MAX, f32::MAX));
-        BoxLanes::load(&Aabb::new(clamp(fat.min), clamp(fat.max)))
+        BoxLanes::load(&clamped_to_finite(&fat.to_aabb()))
     }
 
     /// Step 2 for one collider: the fast path here, everything else in `examine_full`. On the
