@@ -1061,7 +1061,7 @@ impl CanopyBroadPhase {
                 if tb.members.is_empty() || !self.trees_may_pair(a, b) {
                     continue;
                 }
-                let member_marks = marks[b as usize].as_ref().unwrap_or(&tb.no_marks);
+                let member_marks = marks[b as usize].as_ref().unwrap_or_else(|| tb.no_marks());
                 pending_bvh.pairs_with_marked(&pending_marks, &tb.bvh, member_marks, |i, j| {
                     let (id, other) = (ta.pending[i as usize], tb.members[j as usize]);
                     if other == DEAD {
@@ -1326,8 +1326,8 @@ impl CanopyBroadPhase {
                 continue;
             }
             let (ta, tb) = (&self.trees[ia], &self.trees[ib]);
-            let ma = marks[ia].as_ref().unwrap_or(&ta.no_marks);
-            let mb = marks[ib].as_ref().unwrap_or(&tb.no_marks);
+            let ma = marks[ia].as_ref().unwrap_or_else(|| ta.no_marks());
+            let mb = marks[ib].as_ref().unwrap_or_else(|| tb.no_marks());
             let mut keep = |x: u32, y: u32| {
                 let (px, py) = (ta.members[x as usize], tb.members[y as usize]);
                 if px == DEAD || py == DEAD {
