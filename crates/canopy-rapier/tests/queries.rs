@@ -545,14 +545,39 @@ proptest! {
     }
 }
 
-/// A broadphase over every collider of `colliders`: one update that lists them all as
-/// modified, with default integration parameters.
-fn broad_phase_over(colliders: &ColliderSet, bodies: &RigidBodySet) -> CanopyBroadPhase {
-    let all: Vec<ColliderHandle> = colliders.iter().map(|(h, _)| h).collect();
-    let mut canopy = CanopyBroadPhase::new();
-    let params = IntegrationParameters::default();
-    canopy.update(&params, colliders, bodies, &all, &[], &mut Vec::new());
-    canopy
+/// A broadphase over every collider of a world (one update that lists them all as modified,
+/// with default integration parameters) and a narrow phase for its query dispatcher: what the
+/// single-update tests ask their queries of.
+struct QueriesOver {
+    canopy: CanopyBroadPhase,
+    narrow: NarrowPhase,
+}
+
+impl QueriesOver {
+    fn new(colliders: &ColliderSet, bodies: &RigidBodySet) -> Self {
+        let all: Vec<ColliderHandle> = colliders.iter().map(|(h, _)| h).collect();
+        let mut canopy = CanopyBroadPhase::new();
+        let params = IntegrationParameters::default();
+        canopy.update(&params, colliders, bodies, &all, &[], &mut Vec::new());
+        Self {
+            canopy,
+            narrow: NarrowPhase::new(),
+        }
+    }
+
+    /// The scene queries over the world, with the default filter.
+    fn queries<'a>(
+        &'a self,
+        bodies: &'a RigidBodySet,
+        colliders: &'a ColliderSet,
+    ) -> SceneQueries<'a> {
+        self.canopy.scene_queries(
+            self.narrow.query_dispatcher(),
+            bodies,
+            colliders,
+            QueryFilter::default(),
+        )
+    }
 }
 
 #[test]
@@ -760,14 +785,8 @@ fn rays_without_a_direction_hit_only_where_they_start() {
     let bodies = RigidBodySet::new();
     let mut colliders = ColliderSet::new();
     let cube = colliders.insert(ColliderBuilder::cuboid(1.0, 1.0, 1.0));
-    let canopy = broad_phase_over(&colliders, &bodies);
-    let narrow = NarrowPhase::new();
-    let q = canopy.scene_queries(
-        narrow.query_dispatcher(),
-        &bodies,
-        &colliders,
-        QueryFilter::default(),
-    );
+    let over = QueriesOver::new(&colliders, &bodies);
+    let q = over.queries(&bodies, &colliders);
     let dirs = [
         vector![0.0, 0.0, 0.0],
         vector![1.0e-45, 0.0, 0.0],
@@ -824,14 +843,8 @@ fn shape_casts_against_a_heightfield_return() {
             heights,
             vector![1000.0, 1.0, 1000.0],
         ));
-        let narrow = NarrowPhase::new();
-        let canopy = broad_phase_over(&colliders, &bodies);
-        let q = canopy.scene_queries(
-            narrow.query_dispatcher(),
-            &bodies,
-            &colliders,
-            QueryFilter::default(),
-        );
+        let over = QueriesOver::new(&colliders, &bodies);
+        let q = over.queries(&bodies, &colliders);
         let ball = Ball::new(0.5);
         let start = Isometry::translation(0.0, 0.7, 0.0);
         let options = |max_time_of_impact, target_distance| ShapeCastOptions {
@@ -941,14 +954,8 @@ fn queries_far_from_composite_shapes_do_not_panic() {
     );
     let far_ball =
         colliders.insert(ColliderBuilder::ball(1.0).translation(vector![1.0e20, 0.0, 0.0]));
-    let narrow = NarrowPhase::new();
-    let canopy = broad_phase_over(&colliders, &bodies);
-    let q = canopy.scene_queries(
-        narrow.query_dispatcher(),
-        &bodies,
-        &colliders,
-        QueryFilter::default(),
-    );
+    let over = QueriesOver::new(&colliders, &bodies);
+    let q = over.queries(&bodies, &colliders);
     // Far from everything but the ball at 1e20: the ball is the answer (2e19 away), with or
     // without a limit.
     let p = point![1.2e20, 0.0, 0.0];
@@ -999,14 +1006,8 @@ fn large_target_distances_reach_parry_unchanged() {
     let mut colliders = ColliderSet::new();
     let near = colliders.insert(ColliderBuilder::ball(0.5));
     let far = colliders.insert(ColliderBuilder::ball(0.1).translation(vector![50.0, 50.0, 50.0]));
-    let narrow = NarrowPhase::new();
-    let canopy = broad_phase_over(&colliders, &bodies);
-    let q = canopy.scene_queries(
-        narrow.query_dispatcher(),
-        &bodies,
-        &colliders,
-        QueryFilter::default(),
-    );
+    let over = QueriesOver::new(&colliders, &bodies);
+    let q = over.queries(&bodies, &colliders);
     let cube = Cuboid::new(vector![0.5, 0.5, 0.5]);
     let start = Isometry::translation(0.0, 0.5, 0.0);
     let vel = vector![0.0, 1.0, 0.0];
