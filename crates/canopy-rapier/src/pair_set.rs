@@ -61,6 +61,13 @@ impl Edge {
         self.place == LIVE
     }
 
+    /// `true` for the edge that holds a waiting pair's place in the waiting list (the edge in
+    /// the smaller id's list of a pair that is not live).
+    #[inline]
+    fn holds_place(&self) -> bool {
+        self.place != LIVE && self.place != WAITING
+    }
+
     /// The index of the twin edge in the partner list of `other`.
     #[inline]
     fn twin_index(&self) -> usize {
@@ -72,6 +79,10 @@ impl Edge {
 pub(crate) struct PairSet {
     /// Keys of the candidates that are not live, in no particular order.
     waiting_list: Vec<u64>,
+    /// Per entry of `waiting_list`: the index of the pair's edge in the partner list of its
+    /// smaller id (the edge that holds the entry's place), so that moving an entry needs no
+    /// search of the lists.
+    waiting_edge: Vec<u32>,
     adjacency: Vec<Vec<Edge>>,
     /// Per proxy: number of its candidates that are not live.
     waiting: Vec<u32>,
@@ -138,6 +149,9 @@ impl PairSet {
         if let Some(&m) = self.adjacency[a as usize].get(i) {
             let t = &mut self.adjacency[m.other as usize][m.twin_index()].twin;
             *t = (*t & MET) | i as u32;
+            if m.holds_place() {
+                self.waiting_edge[m.place as usize] = i as u32;
+            }
         }
         e
     }
@@ -184,18 +198,19 @@ impl PairSet {
             return None;
         }
         let live = live();
+        let (i, j) = (
+            self.adjacency[lo as usize].len() as u32,
+            self.adjacency[hi as usize].len() as u32,
+        );
         let (place, other_place) = if live {
             self.live += 1;
             (LIVE, LIVE)
         } else {
             self.waiting_list.push(key(a, b));
+            self.waiting_edge.push(i);
             self.count_waiting(a, b, 1);
             (self.waiting_list.len() as u32 - 1, WAITING)
         };
-        let (i, j) = (
-            self.adjacency[lo as usize].len() as u32,
-            self.adjacency[hi as usize].len() as u32,
-        );
         self.adjacency[lo as usize].push(Edge {
             other: hi,
             place,
@@ -234,19 +249,20 @@ impl PairSet {
             self.adjacency[lo as usize][i].place = self.waiting_list.len() as u32;
             self.adjacency[hi as usize][j].place = WAITING;
             self.waiting_list.push(key(a, b));
+            self.waiting_edge.push(i as u32);
         }
         was
     }
 
     /// Takes entry `i` out of the waiting list; the key moved into its place gets its new
-    /// index in its smaller id's edge.
+    /// index in its smaller id's edge (found through `waiting_edge`, without a search).
     fn drop_waiting(&mut self, i: u32) {
         self.waiting_list.swap_remove(i as usize);
+        self.waiting_edge.swap_remove(i as usize);
         if let Some(&moved) = self.waiting_list.get(i as usize) {
-            let (lo, hi) = unkey(moved);
-            if let Some((k, _)) = self.find(lo, hi) {
-                self.adjacency[lo as usize][k].place = i;
-            }
+            let (lo, _) = unkey(moved);
+            let k = self.waiting_edge[i as usize] as usize;
+            self.adjacency[lo as usize][k].place = i;
         }
     }
 
@@ -294,13 +310,31 @@ impl PairSet {
     }
 
     /// Removes every candidate of `a`; returns the former partners (with live flags), in list
-    /// order.
+    /// order. Each partner's edge is found through its twin index, without a search.
     pub fn remove_all(&mut self, a: u32) -> Vec<Edge> {
-        let partners = self.partners(a).to_vec();
-        for e in &partners {
-            self.remove(a, e.other);
+        let count = self.partners(a).len();
+        for k in 0..count {
+            // Read afresh: removing earlier partners' edges may have changed this one's place
+            // (an entry moved in the waiting list), never its twin (no edge of `a` moves).
+            let e = self.adjacency[a as usize][k];
+            let twin = self.take_edge(e.other, e.twin_index());
+            self.candidates -= 1;
+            if e.live() {
+                self.live -= 1;
+            } else {
+                let w = &mut self.waiting[e.other as usize];
+                *w -= 1;
+                let place = if a < e.other { e.place } else { twin.place };
+                self.drop_waiting(place);
+            }
         }
-        partners
+        if let Some(w) = self.waiting.get_mut(a as usize) {
+            *w = 0;
+        }
+        self.adjacency
+            .get_mut(a as usize)
+            .map(std::mem::take)
+            .unwrap_or_default()
     }
 
     /// Every live pair, each once as `(a, b)` with `a < b`, in no particular order.
@@ -425,6 +459,13 @@ mod tests {
                 let expected: Vec<(u32, u32)> =
                     model.iter().filter(|(_, &l)| !l).map(|(&p, _)| p).collect();
                 prop_assert_eq!(waiting, expected);
+                // Each waiting entry knows where its smaller id's edge is.
+                prop_assert_eq!(set.waiting_edge.len(), set.waiting_list().len());
+                for (i, (&k, &at)) in set.waiting_list().iter().zip(&set.waiting_edge).enumerate() {
+                    let (lo, hi) = unkey(k);
+                    let e = set.partners(lo)[at as usize];
+                    prop_assert_eq!((e.other, e.place), (hi, i as u32));
+                }
                 for id in 0..12u32 {
                     let w = model.iter().filter(|(&(x, y), &l)| !l && (x == id || y == id)).count();
                     prop_assert_eq!(set.waiting(id) as usize, w);
