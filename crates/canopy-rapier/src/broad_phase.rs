@@ -22,6 +22,8 @@
 //!    same order with any thread count); proxies added since the last rebuild have a small
 //!    tree of their own, walked with marks against the member trees, and are swept and pruned
 //!    among themselves. A new candidate whose exact boxes overlap is live at once (`AddPair`).
+//!    Last, the live pairs of moved proxies whose exact boxes have parted by more than twice
+//!    the live-pair skin end (`DeletePair`) and wait again as candidates.
 //! 6. Liveness: every collider Rapier reported checks its candidates that are not live yet;
 //!    those whose exact boxes now overlap become live (`AddPair`).
 
@@ -1189,6 +1191,40 @@ impl CanopyBroadPhase {
         ta.len() > 0 && tb.len() > 0 && ta.summary.may_pair_with_tree(&tb.summary)
     }
 
+    /// Step 5, last: the live pairs of the moved proxies whose exact boxes are now more than
+    /// twice the live-pair skin apart end (`DeletePair`) and wait again as candidates (see
+    /// `CanopyBroadPhaseConfig::live_pair_skin`). A pair of two moved proxies is looked at from
+    /// both sides and ends once.
+    fn end_parted_live_pairs(
+        &mut self,
+        moved: &[u32],
+        params: &IntegrationParameters,
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) {
+        // Boxes that do not meet once one of them is loosened by both skins are apart by more
+        // than that; loosening only by a non-negative amount, no pair whose exact boxes
+        // overlap ever ends here (nor with a skin so large that the loosening overflows).
+        let gap = 2.0 * self.config.live_pair_skin * params.length_unit;
+        if !(0.0..f32::MAX).contains(&gap) {
+            // A NaN or negative length unit, or a skin that keeps pairs as long as candidates.
+            return;
+        }
+        let mut parted = Vec::new();
+        for &id in moved {
+            let reach = self.tights[id as usize].loosened(gap);
+            for e in self.pairs.partners(id) {
+                if e.live() && !reach.intersects(&self.tights[e.other as usize]) {
+                    parted.push((id, e.other));
+                }
+            }
+        }
+        for (a, b) in parted {
+            if self.pairs.set_live(a, b, false) {
+                self.push_delete(a, b, events);
+            }
+        }
+    }
+
     /// Step 6: the waiting candidates (not live yet) of the colliders Rapier reported
     /// (`modified`, a bitmap of their indices, `count` of them) whose exact boxes now overlap.
     /// Either every waiting candidate is checked, in the flat list's order, or each reported
@@ -1522,9 +1558,11 @@ impl BroadPhase for CanopyBroadPhase {
             }
         }
 
+        self.end_parted_live_pairs(&moved, params, events);
         lap!(self, clock, pair_edits);
         // 6. Liveness: every collider Rapier reported re-checks its candidates that are not live
-        //    yet (new candidates were checked above). Live pairs end with their candidate.
+        //    yet (new candidates were checked above). Live pairs end with their candidate, or
+        //    in step 5 when their exact boxes part.
         //    A waiting candidate neither of whose colliders was reported kept both boxes, so it
         //    still does not overlap: checking it too changes nothing. So when the reported
         //    colliders hold most waiting candidates, the flat list of waiting candidates is

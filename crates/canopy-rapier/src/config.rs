@@ -9,11 +9,12 @@ use thiserror::Error;
 /// [`CanopyBroadPhaseConfig::validate`] and [`crate::CanopyBroadPhase::with_config`].
 #[derive(Clone, Copy, Debug, PartialEq, Error)]
 pub enum ConfigError {
-    /// A fat-box margin or the velocity stretch is negative, NaN or infinite. A negative one
-    /// would store boxes smaller than the colliders' own and lose pairs.
+    /// A fat-box margin, the velocity stretch or the live-pair skin is negative, NaN or
+    /// infinite. A negative margin would store boxes smaller than the colliders' own and lose
+    /// pairs.
     #[error("{field} must be finite and at least 0, got {value}")]
     NegativeOrNotFinite {
-        /// The field's name (`margin`, `fixed_margin` or `velocity_steps`).
+        /// The field's name (`margin`, `fixed_margin`, `velocity_steps` or `live_pair_skin`).
         field: &'static str,
         /// The value given.
         value: f32,
@@ -79,21 +80,38 @@ pub struct CanopyBroadPhaseConfig {
     /// Fat boxes also cover where the collider will be after this many steps at its parent's
     /// current linear velocity, so that steadily moving bodies stay inside their box for that
     /// long. 0 disables it. It never affects correctness (every step still checks the exact
-    /// box), only how often boxes are re-enlarged against how many extra pairs are reported.
-    /// Default: 6 (Box2D 2.4 stretched by 4 steps, `b2_aabbMultiplier`). Measured on the
-    /// broadphase replays (instructions, 200 steps, against 2): `spawn_storm` -16% (re-enlarged
-    /// boxes per update 471 -> 237), `balls` -3%, `pyramid` +2%; 8 gains little more.
+    /// box), only how often boxes are re-enlarged against how many candidate pairs there are;
+    /// the live pairs do not grow with it, as a pair stays live only while its exact boxes
+    /// touch (`live_pair_skin`). Default: 12 (Box2D 2.4 stretched by 4 steps,
+    /// `b2_aabbMultiplier`, and kept a pair as long as the fat boxes overlapped). Measured with
+    /// `broadphase_replay SCENE ab` (200 steps; time against 6 steps, which kept live pairs as
+    /// long as candidates; two runs each): `spawn_storm` 0.98, `many_kinematics` 0.89 to 0.92,
+    /// `pyramid` 0.96, `teleport` 0.99, `balls` 0.98 to 1.01, `boxes` 1.03 to 1.04,
+    /// `keva_tower` 1.01 to 1.02, `many_pyramids` 1.01 to 1.04; 16 steps made `balls` 1.02 to
+    /// 1.04.
     pub velocity_steps: f32,
     /// Tree maintenance. See [`RebuildPolicy`].
     pub rebuild: RebuildPolicy,
     /// Search new pairs and rebuild trees with rayon (the current pool). Results and event order
     /// are the same with any number of threads. Default: `true`.
     pub parallel: bool,
+    /// When a live pair ends, in multiples of `length_unit`. A candidate pair goes live
+    /// (`AddPair`) once the colliders' exact boxes (Rapier's collision boxes) overlap. It ends
+    /// (`DeletePair`, and waits again as a candidate) once those boxes are more than twice this
+    /// skin apart, which is checked whenever either collider gets a new fat box, and in any
+    /// case when the fat boxes separate (the candidate ends). The skin keeps a pair that
+    /// touches on and off from being deleted and added again every step. The narrow phase
+    /// computes contacts for every live pair, so the sooner a pair that stopped touching ends,
+    /// the less work it does: after `compare`'s 200 steps of `spawn_storm`, 7,992 live pairs
+    /// instead of 9,316 kept as long as their candidates (Rapier's broadphase: 7,465). Use
+    /// `f32::MAX` to keep a live pair as long as its candidate. Default: 0.01 (the skin of the
+    /// leaf boxes of Rapier's own broadphase).
+    pub live_pair_skin: f32,
 }
 
 impl CanopyBroadPhaseConfig {
-    /// `Ok` when every field is in range: the margins and the velocity stretch finite and at
-    /// least 0; the rebuild policy's `max_cost_growth`, `pending_fraction` and
+    /// `Ok` when every field is in range: the margins, the velocity stretch and the live-pair
+    /// skin finite and at least 0; the rebuild policy's `max_cost_growth`, `pending_fraction` and
     /// `max_dead_fraction` at least 0 (infinity allowed: never rebuild for that reason).
     ///
     /// ```
@@ -110,6 +128,7 @@ impl CanopyBroadPhaseConfig {
             ("margin", self.margin),
             ("fixed_margin", self.fixed_margin),
             ("velocity_steps", self.velocity_steps),
+            ("live_pair_skin", self.live_pair_skin),
         ] {
             if !(value.is_finite() && value >= 0.0) {
                 return Err(ConfigError::NegativeOrNotFinite { field, value });
@@ -134,9 +153,10 @@ impl Default for CanopyBroadPhaseConfig {
         Self {
             margin: 0.1,
             fixed_margin: 0.0,
-            velocity_steps: 6.0,
+            velocity_steps: 12.0,
             rebuild: RebuildPolicy::default(),
             parallel: true,
+            live_pair_skin: 0.01,
         }
     }
 }

@@ -1,8 +1,10 @@
 //! Candidate and live pairs. A *candidate* is a pair whose fat boxes overlap. It becomes *live*
 //! (reported to Rapier with `AddPair`) once the exact collision boxes overlap, and stays live
-//! until it stops being a candidate (fat boxes apart, filter, removal): Rapier's narrow phase
-//! pays for every pair it is told about, so pairs that fat boxes alone bring together (the
-//! margin, the velocity stretch) are not reported until they matter. Only candidates that are
+//! until it stops being a candidate (fat boxes apart, filter, removal) or the broadphase sees
+//! its exact boxes parted (`CanopyBroadPhaseConfig::live_pair_skin`; it is then a waiting
+//! candidate again): Rapier's narrow phase pays for every pair it is told about, so pairs that
+//! fat boxes alone bring together (the margin, the velocity stretch) are not reported until
+//! they matter, nor kept once they stop touching. Only candidates that are
 //! not live yet need checking, and per proxy a count of them says whether there are any, so
 //! resting stacks, where every candidate is live, cost nothing here.
 //!

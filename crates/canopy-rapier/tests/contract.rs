@@ -706,6 +706,66 @@ fn invalid_boxes_are_skipped_counted_and_come_back() {
     assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
 }
 
+/// A live pair ends (`DeletePair`) once a moved collider's exact box has parted from its
+/// partner's by more than twice the live-pair skin, while the fat boxes still overlap: it waits
+/// again as a candidate and goes live again (`AddPair`) when the boxes meet. With a skin of
+/// `f32::MAX` the pair stays live as long as the fat boxes overlap.
+#[test]
+fn live_pairs_end_once_their_exact_boxes_part() {
+    for (skin, ends) in [(0.01, true), (f32::MAX, false)] {
+        let mut bodies = RigidBodySet::new();
+        let mut colliders = ColliderSet::new();
+        let mut ball_at = |x: f32| {
+            let body = bodies.insert(RigidBodyBuilder::dynamic().translation(vector![x, 0.0, 0.0]));
+            colliders.insert_with_parent(ColliderBuilder::ball(0.5), body, &mut bodies)
+        };
+        // Touching at x = 0.5.
+        let (a, b) = (ball_at(0.0), ball_at(1.0));
+        let config = CanopyBroadPhaseConfig {
+            margin: 0.5,
+            velocity_steps: 0.0,
+            live_pair_skin: skin,
+            ..Default::default()
+        };
+        let mut bp = Checked::new(config);
+        let params = IntegrationParameters::default();
+        let update = |colliders: &ColliderSet, bp: &mut Checked| {
+            let mut events = Vec::new();
+            bp.update(&params, colliders, &bodies, &[a, b], &[], &mut events);
+            events
+        };
+        update(&colliders, &mut bp);
+        assert!(bp.inner.contains_pair(a, b));
+        // `b` moves 0.6 away: its exact box leaves its fat box (margin 0.5), and its new fat box
+        // still overlaps the fat box of `a`.
+        colliders[b].set_translation(vector![1.6, 0.0, 0.0]);
+        let parted = update(&colliders, &mut bp);
+        assert_eq!(bp.inner.stats().candidates, 1, "skin {skin}");
+        assert_eq!(bp.inner.contains_pair(a, b), !ends, "skin {skin}");
+        assert_eq!(
+            parted
+                .iter()
+                .filter(|e| matches!(e, BroadPhasePairEvent::DeletePair(_)))
+                .count(),
+            ends as usize,
+            "skin {skin}"
+        );
+        // Touching again.
+        colliders[b].set_translation(vector![1.0, 0.0, 0.0]);
+        let met = update(&colliders, &mut bp);
+        assert!(bp.inner.contains_pair(a, b), "skin {skin}");
+        assert_eq!(
+            met.iter()
+                .filter(|e| matches!(e, BroadPhasePairEvent::AddPair(_)))
+                .count(),
+            ends as usize,
+            "skin {skin}"
+        );
+        assert!(bp.checked_pairs > 0);
+        assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+    }
+}
+
 #[test]
 fn huge_coordinates_do_not_panic() {
     let mut rng = Rng(5);
@@ -722,13 +782,15 @@ fn huge_coordinates_do_not_panic() {
 }
 
 proptest! {
-    /// A configuration is accepted exactly when its margins and velocity stretch are finite and
-    /// at least 0 and its rebuild fractions are at least 0; a refused one names its field.
+    /// A configuration is accepted exactly when its margins, velocity stretch and live-pair skin
+    /// are finite and at least 0 and its rebuild fractions are at least 0; a refused one names
+    /// its field.
     #[test]
     fn configurations_are_accepted_exactly_when_in_range(
         margin in prop_oneof![-1.0f32..1.0, Just(f32::NAN), Just(f32::INFINITY)],
         fixed_margin in prop_oneof![0.0f32..1.0, -1.0f32..0.0, Just(f32::NAN)],
         velocity_steps in prop_oneof![0.0f32..20.0, -20.0f32..0.0, Just(f32::NEG_INFINITY)],
+        live_pair_skin in prop_oneof![0.0f32..1.0, Just(f32::MAX), Just(-0.01), Just(f32::NAN)],
         max_cost_growth in prop_oneof![0.0f64..4.0, -1.0f64..0.0, Just(f64::INFINITY), Just(f64::NAN)],
         pending_fraction in prop_oneof![0.0f64..1.0, Just(-0.5), Just(f64::NAN)],
         max_dead_fraction in prop_oneof![0.0f64..1.0, Just(-0.5), Just(f64::NAN)],
@@ -737,13 +799,19 @@ proptest! {
             margin,
             fixed_margin,
             velocity_steps,
+            live_pair_skin,
             ..Default::default()
         };
         config.rebuild.max_cost_growth = max_cost_growth;
         config.rebuild.pending_fraction = pending_fraction;
         config.rebuild.max_dead_fraction = max_dead_fraction;
         let in_range = |x: f32| x.is_finite() && x >= 0.0;
-        let bad_f32 = [("margin", margin), ("fixed_margin", fixed_margin), ("velocity_steps", velocity_steps)]
+        let bad_f32 = [
+            ("margin", margin),
+            ("fixed_margin", fixed_margin),
+            ("velocity_steps", velocity_steps),
+            ("live_pair_skin", live_pair_skin),
+        ]
             .into_iter()
             .find(|&(_, x)| !in_range(x));
         let bad_f64 = [
