@@ -4,19 +4,20 @@
 //! its exact boxes parted (`CanopyBroadPhaseConfig::live_pair_skin`; it is then a waiting
 //! candidate again): Rapier's narrow phase pays for every pair it is told about, so pairs that
 //! fat boxes alone bring together (the margin, the velocity stretch) are not reported until
-//! they matter, nor kept once they stop touching. Only candidates that are
-//! not live yet need checking, and per proxy a count of them says whether there are any, so
-//! resting stacks, where every candidate is live, cost nothing here.
+//! they matter, nor kept once they stop touching. Only candidates that are not live yet need
+//! checking, and per proxy a count of them says whether there are any, so resting stacks, where
+//! every candidate is live, cost nothing here.
 //!
 //! Storage, without a hash map: per proxy the list of its candidate partners (each pair is in
 //! both partners' lists), per proxy the number of its candidates not live yet, and one flat list
 //! of the candidates not live yet, which the liveness pass reads front to back when many proxies
 //! have some, instead of chasing every such proxy's partner list. A pair's edge in the list of
-//! its smaller id holds its place in that flat list (or [`LIVE`]); the edge in the other list
-//! only says whether it is live. Each edge also holds the index of its twin (the same pair's
-//! edge in the other list), kept through every removal, so every lookup of a pair scans only
-//! the shorter of the two lists: a ground or a large static collider with thousands of
-//! partners is never scanned for one of them.
+//! its smaller id holds its place in that flat list (or [`LIVE`]), and the flat list holds that
+//! edge's index beside the pair; the edge in the other list only says whether it is live. Each
+//! edge also holds the index of its twin (the same pair's edge in the other list), kept through
+//! every removal, so every lookup of a pair scans only the shorter of the two lists (a ground or
+//! a large static collider with thousands of partners is never scanned for one of them), and
+//! removing all of a proxy's pairs, or moving an entry of the flat list, scans none.
 //!
 //! When many proxies moved, the broadphase meets every candidate that goes on in its pair
 //! walks; it marks those edges *met* ([`PairSet::mark_met`], on the side of each moved
