@@ -229,7 +229,8 @@ impl Bvh {
     /// # Errors
     /// [`BvhError::InvalidAabb`] naming the first box with a NaN or infinite coordinate or
     /// `min > max`; [`BvhError::InvalidOptions`] for a zero leaf size or a bin count outside
-    /// `2..=32`; [`BvhError::TooManyPrimitives`] beyond `u32::MAX - 1` boxes.
+    /// `2..=32`; [`BvhError::TooManyPrimitives`] beyond 2^31 boxes
+    /// ([`crate::build::MAX_PRIMITIVES`]: a node index must fit in a `u32`).
     ///
     /// # Example
     /// ```

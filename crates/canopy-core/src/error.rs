@@ -11,8 +11,12 @@ pub enum BvhError {
         /// Position of the offending box in the input slice.
         index: usize,
     },
-    /// More primitives than `u32` indices can address.
-    #[error("too many primitives: {count} (at most {} are supported)", u32::MAX - 1)]
+    /// More primitives than `u32` node indices can address (a tree of `n` primitives may have
+    /// `2n - 1` nodes): at most [`crate::build::MAX_PRIMITIVES`], 2^31.
+    #[error(
+        "too many primitives: {count} (at most {} are supported)",
+        crate::build::MAX_PRIMITIVES
+    )]
     TooManyPrimitives {
         /// Number of boxes given.
         count: usize,

@@ -122,11 +122,22 @@ pub(crate) fn first_invalid(aabbs: &[Aabb]) -> Option<usize> {
     None
 }
 
+/// Most primitives one tree holds: nodes (up to `2n - 1` with leaves of one primitive) and
+/// primitives are indexed by `u32`.
+pub const MAX_PRIMITIVES: usize = 1 << 31;
+
+/// `Ok` when a tree of `count` primitives can be built: every node index, up to `2 * count -
+/// 2`, fits in a `u32`.
+pub(crate) fn check_count(count: usize) -> Result<(), BvhError> {
+    if count > MAX_PRIMITIVES {
+        return Err(BvhError::TooManyPrimitives { count });
+    }
+    Ok(())
+}
+
 pub(crate) fn build(aabbs: &[Aabb], options: &BuildOptions) -> Result<Bvh, BvhError> {
     options.check()?;
-    if aabbs.len() >= u32::MAX as usize {
-        return Err(BvhError::TooManyPrimitives { count: aabbs.len() });
-    }
+    check_count(aabbs.len())?;
     if aabbs.is_empty() {
         return Ok(Bvh::default());
     }
@@ -192,4 +203,26 @@ pub(crate) fn append_subtree(out: &mut Vec<Node>, mut right: Vec<Node>) -> u32 {
     }
     out.append(&mut right);
     base
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The largest count whose node indices (up to `2n - 2`) fit in a `u32` is accepted; one
+    /// more primitive is refused rather than built with wrapped indices.
+    #[test]
+    fn primitive_count_stops_where_node_indices_would_wrap() {
+        let largest_node = |n: usize| 2 * n as u64 - 2;
+        assert!(largest_node(MAX_PRIMITIVES) <= u64::from(u32::MAX));
+        assert!(largest_node(MAX_PRIMITIVES + 1) > u64::from(u32::MAX));
+        assert_eq!(check_count(0), Ok(()));
+        assert_eq!(check_count(MAX_PRIMITIVES), Ok(()));
+        assert_eq!(
+            check_count(MAX_PRIMITIVES + 1),
+            Err(BvhError::TooManyPrimitives {
+                count: MAX_PRIMITIVES + 1
+            })
+        );
+    }
 }
