@@ -495,8 +495,11 @@ impl<T> CollisionWorld<T> {
     ///
     /// # Errors
     /// [`CollisionError::InvalidPrediction`] for a negative, NaN or infinite `prediction`;
-    /// [`CollisionError::OutOfRange`] when some box grown by `prediction` overflows. On
-    /// error nothing changed.
+    /// [`CollisionError::OutOfRange`] when some box grown by `prediction` overflows. Both are
+    /// found before anything is modified, so on error nothing changed. (The tree's own build
+    /// and refit cannot fail on boxes checked that way; should they ever, the update returns
+    /// [`CollisionError::OutOfRange`] and the next one recomputes every box and rebuilds the
+    /// tree rather than trust a half-applied update.)
     pub fn update(&mut self, prediction: f32) -> Result<(), CollisionError> {
         if !(prediction.is_finite() && prediction >= 0.0) {
             return Err(CollisionError::InvalidPrediction(prediction));
@@ -505,7 +508,14 @@ impl<T> CollisionWorld<T> {
         let all = self.prediction != Some(prediction);
         let changes = self.pending_changes(prediction, all)?;
         self.prediction = Some(prediction);
-        let candidates = self.broad_phase(changes)?;
+        let candidates = match self.broad_phase(changes) {
+            Ok(candidates) => candidates,
+            Err(e) => {
+                self.prediction = None;
+                self.rebuild = true;
+                return Err(e);
+            }
+        };
         let broad_phase = start.elapsed();
 
         let start = Instant::now();
