@@ -584,8 +584,13 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
 
     #[test]
-    fn contract_holds_under_random_edits(seed in any::<u64>(), parallel in any::<bool>(), margin in 0.0f32..0.5) {
-        let config = CanopyBroadPhaseConfig { margin, parallel, ..Default::default() };
+    fn contract_holds_under_random_edits(
+        seed in any::<u64>(),
+        parallel in any::<bool>(),
+        margin in 0.0f32..0.5,
+        live_pair_skin in prop_oneof![Just(0.0f32), 0.0f32..0.1, Just(f32::MAX)],
+    ) {
+        let config = CanopyBroadPhaseConfig { margin, parallel, live_pair_skin, ..Default::default() };
         let bp = run(seed, 60, 40, 4, config);
         prop_assert!(bp.violations.is_empty(), "{:#?}", &bp.violations[..bp.violations.len().min(10)]);
         prop_assert!(bp.checked_pairs > 0, "the world produced no pair to check");
