@@ -580,6 +580,28 @@ impl QueriesOver {
     }
 }
 
+/// Parry's own cast of `shape`, from `start` at velocity `vel`, against the fixed collider `c`:
+/// its time of impact, the truth for that collider of a scene query's shape cast.
+fn parry_cast_time(
+    c: &Collider,
+    start: &Isometry<Real>,
+    vel: &Vector<Real>,
+    shape: &dyn Shape,
+    options: ShapeCastOptions,
+) -> Option<Real> {
+    rapier3d::parry::query::cast_shapes(
+        c.position(),
+        &Vector::zeros(),
+        c.shape(),
+        start,
+        vel,
+        shape,
+        options,
+    )
+    .unwrap()
+    .map(|hit| hit.time_of_impact)
+}
+
 #[test]
 fn empty_world_answers_nothing() {
     let bodies = RigidBodySet::new();
@@ -857,18 +879,8 @@ fn shape_casts_against_a_heightfield_return() {
                 .map(|(h, hit)| (h, hit.time_of_impact))
         };
         let truth = |vel: Vector<Real>, max_toi: Real, target_distance: Real| {
-            let c = &colliders[ground];
-            rapier3d::parry::query::cast_shapes(
-                c.position(),
-                &Vector::zeros(),
-                c.shape(),
-                &start,
-                &vel,
-                &ball,
-                options(max_toi, target_distance),
-            )
-            .unwrap()
-            .map(|hit| (ground, hit.time_of_impact))
+            let options = options(max_toi, target_distance);
+            parry_cast_time(&colliders[ground], &start, &vel, &ball, options).map(|t| (ground, t))
         };
         // Slowly down, quickly along z: the ball lands at about t = 160 to 200 (z = 160 to
         // 200) and the motion then leaves the heightfield along z only.
@@ -1022,18 +1034,7 @@ fn large_target_distances_reach_parry_unchanged() {
             let truth = [near, far]
                 .into_iter()
                 .filter_map(|h| {
-                    let c = &colliders[h];
-                    rapier3d::parry::query::cast_shapes(
-                        c.position(),
-                        &Vector::zeros(),
-                        c.shape(),
-                        &start,
-                        &vel,
-                        &cube,
-                        options,
-                    )
-                    .unwrap()
-                    .map(|hit| (h, hit.time_of_impact))
+                    parry_cast_time(&colliders[h], &start, &vel, &cube, options).map(|t| (h, t))
                 })
                 .min_by(|a, b| a.1.total_cmp(&b.1));
             let got = q
