@@ -30,7 +30,7 @@
 use crate::box_lanes::BoxLanes;
 use crate::config::{CanopyBroadPhaseConfig, ConfigError};
 use crate::filter::{FilterData, Mobility};
-use crate::pair_set::{unkey, PairSet};
+use crate::pair_set::{unkey, Edge, PairSet};
 use crate::proxy::{Loc, Proxy};
 use crate::proxy_tree::{ProxyTree, DEAD};
 use crate::queries::{QueryMirror, QueryOverlay};
@@ -164,6 +164,23 @@ impl Iterator for SetBits<'_> {
 /// Two proxy ids.
 type IdPair = (u32, u32);
 
+/// Buffers an update fills and empties, kept from one update to the next so that none is
+/// allocated and grown afresh every update (each is empty between updates).
+#[derive(Clone, Debug, Default)]
+struct Scratch {
+    /// The former partners of a proxy taken out (`PairSet::remove_all`).
+    edges: Vec<Edge>,
+    /// Steps 4 and 5: the candidates that ended, the new candidates, and which of a moved
+    /// proxy's candidates its queries met.
+    gone: Vec<IdPair>,
+    found: Vec<IdPair>,
+    seen: Vec<bool>,
+    /// Live pairs whose exact boxes parted (`end_parted_live_pairs`).
+    parted: Vec<IdPair>,
+    /// Step 6: the waiting candidates that become live.
+    flips: Vec<IdPair>,
+}
+
 /// The inputs of step 2 (`examine_all`).
 #[derive(Clone, Copy)]
 struct ExaminePass<'a> {
@@ -295,6 +312,7 @@ pub struct CanopyBroadPhase {
     /// Reused buffers: a bitmap of the modified handles' indices (all zero between updates;
     /// step 6 reads it) and their generations.
     scratch_order: (Vec<u64>, Vec<u32>),
+    scratch: Scratch,
     /// Edits made outside a step, for the scene queries (`queries/overlay.rs`).
     pub(crate) overlay: QueryOverlay,
     /// The parry BVH behind `as_query_pipeline` (`queries/pipeline.rs`).
@@ -429,7 +447,10 @@ impl CanopyBroadPhase {
         if p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED) {
             self.fixed_fixed -= 1;
         }
-        self.pairs.remove_all(id);
+        let mut edges = std::mem::take(&mut self.scratch.edges);
+        self.pairs.remove_all(id, &mut edges);
+        edges.clear();
+        self.scratch.edges = edges;
     }
 
     fn take_out_of_tree(&mut self, p: &mut Proxy) {
@@ -942,11 +963,14 @@ impl CanopyBroadPhase {
                 self.take_out_of_tree(&mut p);
                 self.stats.invalid += 1;
                 self.proxies[id as usize] = Some(p);
-                for e in self.pairs.remove_all(id) {
+                let mut edges = std::mem::take(&mut self.scratch.edges);
+                self.pairs.remove_all(id, &mut edges);
+                for e in edges.drain(..) {
                     if e.live() {
                         self.push_delete(id, e.other, events);
                     }
                 }
+                self.scratch.edges = edges;
             } else {
                 self.proxies[id as usize] = Some(p);
             }
@@ -1119,8 +1143,8 @@ impl CanopyBroadPhase {
             return;
         };
         // Its current candidates are met again: they are recognised here, from its own short
-        // partner list, rather than by `PairSet::insert` (which scans the shorter of the two
-        // lists), and marked as seen.
+        // partner list, and marked as seen; every other pair it reports is new
+        // (`PairSet::insert_new`).
         let known = self.pairs.partners(id);
         seen.clear();
         seen.resize(known.len(), false);
@@ -1209,7 +1233,7 @@ impl CanopyBroadPhase {
             // A NaN or negative length unit, or a skin that keeps pairs as long as candidates.
             return;
         }
-        let mut parted = Vec::new();
+        let mut parted = std::mem::take(&mut self.scratch.parted);
         for &id in moved {
             let reach = self.tights[id as usize].loosened(gap);
             for e in self.pairs.partners(id) {
@@ -1218,11 +1242,13 @@ impl CanopyBroadPhase {
                 }
             }
         }
-        for (a, b) in parted {
+        for &(a, b) in &parted {
             if self.pairs.set_live(a, b, false) {
                 self.push_delete(a, b, events);
             }
         }
+        parted.clear();
+        self.scratch.parted = parted;
     }
 
     /// Step 6: the waiting candidates (not live yet) of the colliders Rapier reported
@@ -1231,11 +1257,10 @@ impl CanopyBroadPhase {
     /// proxy's, in index order: whichever reads less, by an estimate (each reported proxy's
     /// lookup, plus its share of the waiting candidates, two ends each). Both give the same
     /// pairs (see step 6 in `update`).
-    fn liveness_flips(&self, modified: &[u64], count: usize) -> Vec<IdPair> {
+    fn liveness_flips(&self, modified: &[u64], count: usize, flips: &mut Vec<IdPair>) {
         let waiting = self.pairs.waiting_list();
-        let mut flips = Vec::new();
         if waiting.is_empty() {
-            return flips;
+            return;
         }
         let tights = &self.tights;
         let proxies = self.proxies.len().max(1);
@@ -1249,7 +1274,7 @@ impl CanopyBroadPhase {
                     flips.push((a, b));
                 }
             }
-            return flips;
+            return;
         }
         let reported = |id: u32| {
             modified
@@ -1271,7 +1296,6 @@ impl CanopyBroadPhase {
                 }
             }
         }
-        flips
     }
 
     /// Steps 4 and 5: the candidates of moved proxies that ended, and every new candidate pair
@@ -1281,10 +1305,11 @@ impl CanopyBroadPhase {
     /// moved proxies that no walk met ended.
     fn find_changed_pairs(&mut self, moved: &[u32]) -> (Vec<IdPair>, Vec<IdPair>) {
         let members: usize = self.trees.iter().map(|t| t.members.len()).sum();
-        let mut found = Vec::new();
+        let mut found = std::mem::take(&mut self.scratch.found);
+        let mut gone = std::mem::take(&mut self.scratch.gone);
         if moved.len() * SPARSE_MOVES < members {
             // Few moved: one query each beats any pass over whole trees.
-            let (mut gone, mut seen) = (Vec::new(), Vec::new());
+            let mut seen = std::mem::take(&mut self.scratch.seen);
             for (k, &id) in moved.iter().enumerate() {
                 // Records and partner lists a few moved proxies ahead (`PREFETCH_AHEAD`): the
                 // query and the check of known partners then do not wait for them.
@@ -1297,6 +1322,8 @@ impl CanopyBroadPhase {
                 }
                 self.moved_pairs(id, &mut seen, &mut gone, &mut found);
             }
+            seen.clear();
+            self.scratch.seen = seen;
             return (gone, found);
         }
         let marks = self.member_marks(moved);
@@ -1309,7 +1336,6 @@ impl CanopyBroadPhase {
         let is_moved = |id: u32| proxies[id as usize].as_ref().is_some_and(|p| p.moved);
         found.retain(|&(a, b)| !pairs.mark_met(a, b, is_moved(a), is_moved(b)));
         // Every marked list is read here (`moved` holds each id once: `mark_moved`).
-        let mut gone = Vec::new();
         for &id in moved {
             self.pairs.take_unmet(id, &mut gone);
         }
@@ -1535,7 +1561,7 @@ impl BroadPhase for CanopyBroadPhase {
         //    them), and 5. new candidates, live at once when their exact boxes overlap. The
         //    candidates that end are all dropped before any new one is added.
         let moved = std::mem::take(&mut self.moved);
-        let (gone, found) = self.find_changed_pairs(&moved);
+        let (mut gone, mut found) = self.find_changed_pairs(&moved);
         lap!(self, clock, search);
         // Both ends' partner lists (and, for new pairs, exact boxes) are asked for a few pairs
         // ahead: the pairs' proxies are scattered over the arrays.
@@ -1551,12 +1577,16 @@ impl BroadPhase for CanopyBroadPhase {
                 prefetch(self.tights.as_ptr().wrapping_add(x as usize));
                 prefetch(self.tights.as_ptr().wrapping_add(y as usize));
             }
-            let tights = &self.tights;
-            let overlap = || tights[a as usize].intersects(&tights[b as usize]);
-            if self.pairs.insert(a, b, overlap) == Some(true) {
+            // Every pair found is new (see `PairSet::insert_new`).
+            let live = self.tights[a as usize].intersects(&self.tights[b as usize]);
+            self.pairs.insert_new(a, b, live);
+            if live {
                 self.push_add(a, b, events);
             }
         }
+        gone.clear();
+        found.clear();
+        (self.scratch.gone, self.scratch.found) = (gone, found);
 
         self.end_parted_live_pairs(&moved, params, events);
         lap!(self, clock, pair_edits);
@@ -1567,14 +1597,17 @@ impl BroadPhase for CanopyBroadPhase {
         //    still does not overlap: checking it too changes nothing. So when the reported
         //    colliders hold most waiting candidates, the flat list of waiting candidates is
         //    read front to back; otherwise each reported collider's partner list is.
-        let flips = self.liveness_flips(&bits, modified_colliders.len());
+        let mut flips = std::mem::take(&mut self.scratch.flips);
+        self.liveness_flips(&bits, modified_colliders.len(), &mut flips);
         bits.fill(0);
         self.scratch_order = (bits, generations);
-        for (a, b) in flips {
+        for &(a, b) in &flips {
             if !self.pairs.set_live(a, b, true) {
                 self.push_add(a, b, events);
             }
         }
+        flips.clear();
+        self.scratch.flips = flips;
         lap!(self, clock, liveness);
         let added = events[events_before..]
             .iter()
