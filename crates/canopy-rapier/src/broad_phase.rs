@@ -1448,8 +1448,14 @@ impl BroadPhase for CanopyBroadPhase {
         }
         #[cfg(feature = "phase-times")]
         let mut clock = crate::phase_times::Clock::start();
-        // 1. Removals first.
-        for &handle in removed_colliders {
+        // 1. Removals first, each proxy's partner list asked for a few removals ahead.
+        for (k, &handle) in removed_colliders.iter().enumerate() {
+            if let Some(ahead) = removed_colliders.get(k + PREFETCH_AHEAD) {
+                self.pairs.prefetch_list_head(ahead.into_raw_parts().0);
+            }
+            if let Some(near) = removed_colliders.get(k + PREFETCH_AHEAD / 2) {
+                self.pairs.prefetch_list(near.into_raw_parts().0);
+            }
             if self.proxy(handle).is_some() {
                 self.remove_proxy(handle.into_raw_parts().0);
             }

@@ -24,6 +24,8 @@
 //! partner), and a moved proxy's candidates left unmarked are the ones that ended
 //! ([`PairSet::take_unmet`], which also clears the marks). No partner is looked up to decide.
 
+use crate::broad_phase::prefetch;
+
 /// The place of a live candidate.
 const LIVE: u32 = u32::MAX;
 /// The place held by the edge in the larger id's list of a candidate that is not live.
@@ -32,6 +34,9 @@ const WAITING: u32 = u32::MAX - 1;
 /// between updates (see [`PairSet::mark_met`]). Twin indices stay below it: a partner list
 /// holds at most one edge per other proxy id, far fewer than 2^31.
 const MET: u32 = 1 << 31;
+
+/// `PairSet::remove_all` asks for a partner's twin edge this many partners ahead of its turn.
+const REMOVE_AHEAD: usize = 2;
 
 /// The two proxy ids of a key, smaller first.
 #[inline]
@@ -301,14 +306,14 @@ impl PairSet {
     /// Starts loading the head of `a`'s partner list (where the list is), without waiting.
     #[inline]
     pub fn prefetch_list_head(&self, a: u32) {
-        crate::broad_phase::prefetch(self.adjacency.as_ptr().wrapping_add(a as usize));
+        prefetch(self.adjacency.as_ptr().wrapping_add(a as usize));
     }
 
     /// Starts loading the first edges of `a`'s partner list (reads its head, which
     /// `prefetch_list_head` should have asked for earlier).
     #[inline]
     pub fn prefetch_list(&self, a: u32) {
-        crate::broad_phase::prefetch(self.partners(a).as_ptr());
+        prefetch(self.partners(a).as_ptr());
     }
 
     /// Candidate partners of `a`.
@@ -327,7 +332,16 @@ impl PairSet {
     /// list before).
     pub fn remove_all(&mut self, a: u32, out: &mut Vec<Edge>) {
         let count = self.partners(a).len();
+        // The partners' lists are scattered: every partner's list head is asked for at once,
+        // then each twin edge a few partners ahead of its turn (its address is in the head).
+        for e in self.partners(a) {
+            self.prefetch_list_head(e.other);
+        }
         for k in 0..count {
+            if let Some(ahead) = self.partners(a).get(k + REMOVE_AHEAD) {
+                let list = self.partners(ahead.other);
+                prefetch(list.as_ptr().wrapping_add(ahead.twin_index()));
+            }
             // Read afresh: removing earlier partners' edges may have changed this one's place
             // (an entry moved in the waiting list), never its twin (no edge of `a` moves).
             let e = self.adjacency[a as usize][k];
