@@ -175,10 +175,11 @@ struct Scratch {
     gone: Vec<IdPair>,
     found: Vec<IdPair>,
     seen: Vec<bool>,
-    /// Live pairs whose exact boxes parted (`end_parted_live_pairs`).
-    parted: Vec<IdPair>,
-    /// Step 6: the waiting candidates that become live.
-    flips: Vec<IdPair>,
+    /// Live pairs whose exact boxes parted (`end_parted_live_pairs`), and step 6's waiting
+    /// candidates that become live: each as a proxy id and the index of the pair's edge in
+    /// its partner list.
+    parted: Vec<(u32, u32)>,
+    flips: Vec<(u32, u32)>,
 }
 
 /// The inputs of step 2 (`examine_all`).
@@ -1233,18 +1234,19 @@ impl CanopyBroadPhase {
             // A NaN or negative length unit, or a skin that keeps pairs as long as candidates.
             return;
         }
+        // `(id, k)`: edge `k` of the partner list of `id`.
         let mut parted = std::mem::take(&mut self.scratch.parted);
         for &id in moved {
             let reach = self.tights[id as usize].loosened(gap);
-            for e in self.pairs.partners(id) {
+            for (k, e) in self.pairs.partners(id).iter().enumerate() {
                 if e.live() && !reach.intersects(&self.tights[e.other as usize]) {
-                    parted.push((id, e.other));
+                    parted.push((id, k as u32));
                 }
             }
         }
-        for &(a, b) in &parted {
-            if self.pairs.set_live(a, b, false) {
-                self.push_delete(a, b, events);
+        for &(a, k) in &parted {
+            if self.pairs.set_live_at(a, k as usize, false) {
+                self.push_delete(a, self.pairs.partners(a)[k as usize].other, events);
             }
         }
         parted.clear();
@@ -1256,8 +1258,9 @@ impl CanopyBroadPhase {
     /// Either every waiting candidate is checked, in the flat list's order, or each reported
     /// proxy's, in index order: whichever reads less, by an estimate (each reported proxy's
     /// lookup, plus its share of the waiting candidates, two ends each). Both give the same
-    /// pairs (see step 6 in `update`).
-    fn liveness_flips(&self, modified: &[u64], count: usize, flips: &mut Vec<IdPair>) {
+    /// pairs (see step 6 in `update`), each into `flips` as a proxy id and the index of the
+    /// pair's edge in its partner list (for `PairSet::set_live_at`).
+    fn liveness_flips(&self, modified: &[u64], count: usize, flips: &mut Vec<(u32, u32)>) {
         let waiting = self.pairs.waiting_list();
         if waiting.is_empty() {
             return;
@@ -1266,12 +1269,12 @@ impl CanopyBroadPhase {
         let proxies = self.proxies.len().max(1);
         let per_proxy_reads = count + 2 * waiting.len() * count.min(proxies) / proxies;
         if waiting.len() <= per_proxy_reads {
-            for &k in waiting {
+            for (&k, &edge) in waiting.iter().zip(self.pairs.waiting_edges()) {
                 let (a, b) = unkey(k);
                 // Without early exits: a partial overlap along one axis is common among
                 // waiting candidates, and each early exit mispredicted (spawn_storm: ~3%).
                 if tights[a as usize].intersects_branchless(&tights[b as usize]) {
-                    flips.push((a, b));
+                    flips.push((a, edge));
                 }
             }
             return;
@@ -1286,13 +1289,13 @@ impl CanopyBroadPhase {
                 continue;
             }
             let tight = &tights[id as usize];
-            for e in self.pairs.partners(id) {
+            for (k, e) in self.pairs.partners(id).iter().enumerate() {
                 // A pair of two reported colliders is checked once, from its smaller id.
                 if e.live() || (e.other < id && reported(e.other)) {
                     continue;
                 }
                 if tight.intersects_branchless(&tights[e.other as usize]) {
-                    flips.push((id, e.other));
+                    flips.push((id, k as u32));
                 }
             }
         }
@@ -1607,9 +1610,9 @@ impl BroadPhase for CanopyBroadPhase {
         self.liveness_flips(&bits, modified_colliders.len(), &mut flips);
         bits.fill(0);
         self.scratch_order = (bits, generations);
-        for &(a, b) in &flips {
-            if !self.pairs.set_live(a, b, true) {
-                self.push_add(a, b, events);
+        for &(a, k) in &flips {
+            if !self.pairs.set_live_at(a, k as usize, true) {
+                self.push_add(a, self.pairs.partners(a)[k as usize].other, events);
             }
         }
         flips.clear();

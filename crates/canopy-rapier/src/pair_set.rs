@@ -240,13 +240,14 @@ impl PairSet {
         self.candidates += 1;
     }
 
-    /// Sets the live flag of candidate `a`-`b`; returns the previous flag (`false`, and nothing
-    /// changes, when `a`-`b` is not a candidate).
-    pub fn set_live(&mut self, a: u32, b: u32, live: bool) -> bool {
-        let (lo, hi) = (a.min(b), a.max(b));
-        let Some((i, j)) = self.find(lo, hi) else {
-            return false;
-        };
+    /// Sets the live flag of the candidate whose edge is entry `i` of the partner list of `a`
+    /// (callers that read that list, or the waiting list's `waiting_edge`, know it: no search);
+    /// returns the previous flag. Edges keep their indices through this call: only insertions
+    /// and removals move them.
+    pub fn set_live_at(&mut self, a: u32, i: usize, live: bool) -> bool {
+        let e = self.adjacency[a as usize][i];
+        let (b, j) = (e.other, e.twin_index());
+        let (lo, hi, i, j) = if a < b { (a, b, i, j) } else { (b, a, j, i) };
         let place = self.adjacency[lo as usize][i].place;
         let was = place == LIVE;
         if was == live {
@@ -254,16 +255,16 @@ impl PairSet {
         }
         if live {
             self.live += 1;
-            self.count_waiting(a, b, -1);
+            self.count_waiting(lo, hi, -1);
             self.adjacency[lo as usize][i].place = LIVE;
             self.adjacency[hi as usize][j].place = LIVE;
             self.drop_waiting(place);
         } else {
             self.live -= 1;
-            self.count_waiting(a, b, 1);
+            self.count_waiting(lo, hi, 1);
             self.adjacency[lo as usize][i].place = self.waiting_list.len() as u32;
             self.adjacency[hi as usize][j].place = WAITING;
-            self.waiting_list.push(key(a, b));
+            self.waiting_list.push(key(lo, hi));
             self.waiting_edge.push(i as u32);
         }
         was
@@ -284,6 +285,12 @@ impl PairSet {
     /// Keys of the candidates that are not live (see [`unkey`]).
     pub fn waiting_list(&self) -> &[u64] {
         &self.waiting_list
+    }
+
+    /// Per entry of [`PairSet::waiting_list`], the index of the pair's edge in the partner
+    /// list of its smaller id.
+    pub fn waiting_edges(&self) -> &[u32] {
+        &self.waiting_edge
     }
 
     /// Removes candidate `a`-`b`; returns whether it was live (`None` when it was not there).
@@ -384,7 +391,7 @@ mod tests {
     #[derive(Clone, Debug)]
     enum Op {
         Insert(u32, u32, bool),
-        Live(u32, u32),
+        Live(u32, u32, bool),
         Remove(u32, u32),
         RemoveAll(u32),
         /// Mark the candidates of the proxy whose positions (in partner order) are set in the
@@ -396,7 +403,7 @@ mod tests {
         let id = 0u32..12;
         prop_oneof![
             4 => (id.clone(), id.clone(), prop::bool::ANY).prop_map(|(a, b, l)| Op::Insert(a, b, l)),
-            3 => (id.clone(), id.clone()).prop_map(|(a, b)| Op::Live(a, b)),
+            3 => (id.clone(), id.clone(), prop::bool::ANY).prop_map(|(a, b, l)| Op::Live(a, b, l)),
             2 => (id.clone(), id.clone()).prop_map(|(a, b)| Op::Remove(a, b)),
             1 => id.clone().prop_map(Op::RemoveAll),
             2 => (id, prop::num::u16::ANY).prop_map(|(a, m)| Op::Met(a, m)),
@@ -421,10 +428,13 @@ mod tests {
                         }
                         Some(&was) => prop_assert_eq!(set.is_live(a, b), was),
                     },
-                    Op::Live(a, b) if a != b => {
-                        if let Some(live) = model.get_mut(&norm(a, b)) {
-                            prop_assert_eq!(set.set_live(a, b, true), *live);
-                            *live = true;
+                    Op::Live(a, b, live) if a != b => {
+                        if let Some(was) = model.get_mut(&norm(a, b)) {
+                            // From either end's list.
+                            let i = set.partners(a).iter().position(|e| e.other == b);
+                            prop_assert!(i.is_some());
+                            prop_assert_eq!(set.set_live_at(a, i.unwrap_or(0), live), *was);
+                            *was = live;
                         }
                     }
                     Op::Remove(a, b) if a != b => {
