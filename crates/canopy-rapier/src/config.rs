@@ -38,7 +38,7 @@ pub struct RebuildPolicy {
     /// Builder for the tree of fixed colliders, which rarely changes. Default: binned SAH.
     pub fixed_builder: Builder,
     /// Rebuild a refit tree once its SAH cost exceeds this multiple of its cost right after the
-    /// last build (compared every 16 refits). Default: 1.5.
+    /// last build. Default: 1.5.
     pub max_cost_growth: f64,
     /// New colliders wait in a pending list with a small tree of its own (rebuilt when the list
     /// changes, refit when only boxes do); the main tree is rebuilt once that list exceeds

@@ -10,12 +10,8 @@ use crate::proxy::{Loc, Proxy};
 use canopy_core::{Aabb, BuildOptions, Builder, Bvh, PairMarks, Ray};
 use rapier3d::na::Point3;
 
-/// Refits between two comparisons of the SAH cost with the cost after the last build. Each
-/// comparison is a pass over every node (about 40 µs for `spawn_storm`'s 4,000 proxies, whose
-/// moving tree is refit every step); every 16 refits instead of every 4, `spawn_storm` took
-/// 1/1.034 the time (`tools/ab`) with the same 16 rebuilds, and `many_kinematics` rebuilt 7
-/// times instead of 8 in 200 steps, no slower.
-const COST_CHECK_INTERVAL: u32 = 16;
+/// Refits between two comparisons of the SAH cost with the cost after the last build.
+const COST_CHECK_INTERVAL: u32 = 4;
 
 /// Marks a slot whose proxy has left the tree.
 pub(crate) const DEAD: u32 = u32::MAX;
