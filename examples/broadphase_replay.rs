@@ -5,8 +5,9 @@
 //!
 //! `cargo run --release --example broadphase_replay -- SCENE rapier|canopy|ab|split [STEPS] [small|full]`
 //! (canopy's margin and velocity stretch can be overridden with `CANOPY_MARGIN` and
-//! `CANOPY_VELOCITY_STEPS`, `CANOPY_PENDING_FRACTION`, `CANOPY_DEAD_FRACTION`,
-//! `CANOPY_COST_GROWTH`, and `CANOPY_MOVING_SAH` to build moving trees with binned SAH).
+//! `CANOPY_VELOCITY_STEPS`, `CANOPY_LIVE_PAIR_SKIN`, `CANOPY_PENDING_FRACTION`,
+//! `CANOPY_DEAD_FRACTION`, `CANOPY_COST_GROWTH`, and `CANOPY_MOVING_SAH` to build moving trees
+//! with binned SAH).
 //!
 //! `ab` times, in one process on one recording, canopy with the default configuration (A)
 //! against canopy with the overrides above (B) and `AabbFloor`, update by update, each on a
@@ -68,6 +69,9 @@ fn main() {
             }
             if let Some(v) = var("CANOPY_DEAD_FRACTION") {
                 config.rebuild.max_dead_fraction = v as f64;
+            }
+            if let Some(v) = var("CANOPY_LIVE_PAIR_SKIN") {
+                config.live_pair_skin = v;
             }
             Box::new(CanopyBroadPhase::with_config(config).unwrap_or_else(|e| {
                 eprintln!("{e}");
