@@ -1035,6 +1035,27 @@ impl CanopyBroadPhase {
         }
     }
 
+    /// Sets the live flag of the candidate at edge `k` of the partner list of `a`
+    /// (`PairSet::set_live_at`) and, when the flag changed, reports it: `AddPair` for a pair
+    /// gone live, `DeletePair` for one waiting again.
+    fn set_live_reported(
+        &mut self,
+        a: u32,
+        k: u32,
+        live: bool,
+        events: &mut Vec<BroadPhasePairEvent>,
+    ) {
+        if self.pairs.set_live_at(a, k as usize, live) == live {
+            return;
+        }
+        let b = self.pairs.partners(a)[k as usize].other;
+        if live {
+            self.push_add(a, b, events);
+        } else {
+            self.push_delete(a, b, events);
+        }
+    }
+
     /// Step 5 for the pending proxies (not in a BVH yet): against BVH members, a marked walk of
     /// each pending tree against each member tree (pairs where either side moved); among
     /// themselves, one sweep along x.
@@ -1245,9 +1266,7 @@ impl CanopyBroadPhase {
             }
         }
         for &(a, k) in &parted {
-            if self.pairs.set_live_at(a, k as usize, false) {
-                self.push_delete(a, self.pairs.partners(a)[k as usize].other, events);
-            }
+            self.set_live_reported(a, k, false, events);
         }
         parted.clear();
         self.scratch.parted = parted;
@@ -1611,9 +1630,7 @@ impl BroadPhase for CanopyBroadPhase {
         bits.fill(0);
         self.scratch_order = (bits, generations);
         for &(a, k) in &flips {
-            if !self.pairs.set_live_at(a, k as usize, true) {
-                self.push_add(a, self.pairs.partners(a)[k as usize].other, events);
-            }
+            self.set_live_reported(a, k, true, events);
         }
         flips.clear();
         self.scratch.flips = flips;

@@ -208,12 +208,6 @@ impl PairSet {
             self.find(lo, hi).is_none(),
             "{lo}-{hi} is a candidate already"
         );
-        self.add(lo, hi, live);
-    }
-
-    /// Adds candidate `lo`-`hi` (`lo < hi`, not a candidate).
-    #[inline]
-    fn add(&mut self, lo: u32, hi: u32, live: bool) {
         let (i, j) = (
             self.adjacency[lo as usize].len() as u32,
             self.adjacency[hi as usize].len() as u32,
