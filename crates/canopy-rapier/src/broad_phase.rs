@@ -448,8 +448,20 @@ impl CanopyBroadPhase {
         if p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED) {
             self.fixed_fixed -= 1;
         }
+        self.drop_pairs(id, None);
+    }
+
+    /// Drops every candidate of proxy `id` (`PairSet::remove_all`); with `events`, reports
+    /// `DeletePair` for those that were live (`id`'s proxy must then be in place, for the
+    /// pair's handles).
+    fn drop_pairs(&mut self, id: u32, events: Option<&mut Vec<BroadPhasePairEvent>>) {
         let mut edges = std::mem::take(&mut self.scratch.edges);
         self.pairs.remove_all(id, &mut edges);
+        if let Some(events) = events {
+            for e in edges.iter().filter(|e| e.live()) {
+                self.push_delete(id, e.other, events);
+            }
+        }
         edges.clear();
         self.scratch.edges = edges;
     }
@@ -964,14 +976,7 @@ impl CanopyBroadPhase {
                 self.take_out_of_tree(&mut p);
                 self.stats.invalid += 1;
                 self.proxies[id as usize] = Some(p);
-                let mut edges = std::mem::take(&mut self.scratch.edges);
-                self.pairs.remove_all(id, &mut edges);
-                for e in edges.drain(..) {
-                    if e.live() {
-                        self.push_delete(id, e.other, events);
-                    }
-                }
-                self.scratch.edges = edges;
+                self.drop_pairs(id, Some(events));
             } else {
                 self.proxies[id as usize] = Some(p);
             }
