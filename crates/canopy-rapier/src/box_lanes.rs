@@ -8,6 +8,7 @@
 //! compiler anyway).
 
 use canopy_core::Aabb;
+use rapier3d::parry::bounding_volume::Aabb as ParryAabb;
 
 /// A box as two overlapping windows of its six floats (see the module comment).
 #[derive(Clone, Copy, Debug)]
@@ -36,6 +37,16 @@ impl BoxLanes {
     #[inline(always)]
     pub(crate) fn load(a: &Aabb) -> Self {
         let (lo, hi) = imp::load(a);
+        Self { lo, hi }
+    }
+
+    /// The lanes of a box parry just returned, read as `Collider::compute_collision_aabb`
+    /// writes its result (16 bytes, then 8): a load that straddled those two stores (as
+    /// copying the box into an [`Aabb`] did) could not take its data from them and waited for
+    /// both to reach the cache, twice per collider in the examine loop.
+    #[inline(always)]
+    pub(crate) fn load_parry(a: &ParryAabb) -> Self {
+        let (lo, hi) = imp::load_parry(a);
         Self { lo, hi }
     }
 
@@ -90,11 +101,13 @@ use portable as imp;
 #[cfg(target_arch = "x86_64")]
 mod sse {
     use canopy_core::Aabb;
+    use rapier3d::parry::bounding_volume::Aabb as ParryAabb;
     use std::arch::x86_64::*;
 
     pub(crate) type V = __m128;
 
     const _: () = assert!(std::mem::size_of::<Aabb>() == 24);
+    const _: () = assert!(std::mem::size_of::<ParryAabb>() == 24);
 
     /// Per lane: `(c - h) - pad` where `lower`, else `(c + h) + pad` (a subtraction as the
     /// addition of the negated operand: the same number).
@@ -173,6 +186,19 @@ mod sse {
     }
 
     #[inline(always)]
+    pub(crate) fn load_parry(a: &ParryAabb) -> (V, V) {
+        let p = (a as *const ParryAabb).cast::<f32>();
+        // SAFETY: parry's `Aabb` is `repr(C)`, `mins` then `maxs`, six `f32` (24 bytes,
+        // asserted above): floats 0..4, then floats 4..6 as one 8-byte load, both within it.
+        unsafe {
+            let lo = _mm_loadu_ps(p);
+            let tail = _mm_castpd_ps(_mm_load_sd(p.add(4).cast::<f64>()));
+            // min.z, max.x (lanes 2, 3 of `lo`), then max.y, max.z (lanes 0, 1 of `tail`).
+            (lo, _mm_shuffle_ps::<0b01_00_11_10>(lo, tail))
+        }
+    }
+
+    #[inline(always)]
     pub(crate) fn write(lo: V, hi: V, out: &mut Aabb) {
         let p = (out as *mut Aabb).cast::<f32>();
         // SAFETY: `Aabb` is `repr(C)`, six `f32` (`min` then `max`; 24 bytes, asserted above):
@@ -203,6 +229,7 @@ mod sse {
 #[cfg(any(test, not(target_arch = "x86_64")))]
 mod portable {
     use canopy_core::Aabb;
+    use rapier3d::parry::bounding_volume::Aabb as ParryAabb;
 
     pub(crate) type V = [f32; 4];
 
@@ -244,6 +271,12 @@ mod portable {
             [a.min.x, a.min.y, a.min.z, a.max.x],
             [a.min.z, a.max.x, a.max.y, a.max.z],
         )
+    }
+
+    #[inline(always)]
+    pub(crate) fn load_parry(a: &ParryAabb) -> (V, V) {
+        let (n, x) = (a.mins, a.maxs);
+        ([n.x, n.y, n.z, x.x], [n.z, x.x, x.y, x.z])
     }
 
     #[inline(always)]
@@ -326,6 +359,22 @@ mod tests {
             let mut out = Aabb::EMPTY;
             portable::write(lo, hi, &mut out);
             prop_assert_eq!(bits(&out), want);
+        }
+
+        /// `load_parry` gives the lanes of parry's box as they are, on both implementations,
+        /// and writes back the same box.
+        #[test]
+        fn load_parry_is_the_box(
+            mins in prop::array::uniform3(coord()),
+            maxs in prop::array::uniform3(coord()),
+        ) {
+            let parry = ParryAabb::new(mins.into(), maxs.into());
+            let want = Aabb::from_arrays(mins, maxs);
+            prop_assert_eq!(bits(&BoxLanes::load_parry(&parry).to_aabb()), bits(&want));
+            let (lo, hi) = portable::load_parry(&parry);
+            let mut out = Aabb::EMPTY;
+            portable::write(lo, hi, &mut out);
+            prop_assert_eq!(bits(&out), bits(&want));
         }
 
         /// The portable `inside` is `Aabb::contains`, NaNs included.

@@ -506,9 +506,23 @@ impl CanopyBroadPhase {
         written_out: bool,
         negative_loosening: &mut usize,
     ) -> Aabb {
+        Self::collision_lanes(params, collider, parent, written_out, negative_loosening).to_aabb()
+    }
+
+    /// `collision_aabb` as lanes, for the examine loop: parry's box goes from the two stores
+    /// that return it to the lanes without a load that straddles them
+    /// (`BoxLanes::load_parry`).
+    #[inline(always)]
+    fn collision_lanes(
+        params: &IntegrationParameters,
+        collider: &Collider,
+        parent: Option<&RigidBody>,
+        written_out: bool,
+        negative_loosening: &mut usize,
+    ) -> BoxLanes {
         let prediction = params.prediction_distance() / 2.0;
         let amount = collider.contact_skin() + prediction;
-        let mut aabb = if amount.is_nan() || amount < 0.0 {
+        let aabb = if amount.is_nan() || amount < 0.0 {
             *negative_loosening += 1;
             Self::unloosened_aabb(collider)
         } else if written_out {
@@ -518,20 +532,34 @@ impl CanopyBroadPhase {
         };
         if let Some(rb) = parent {
             if rb.soft_ccd_prediction() > 0.0 {
-                // A predicted pose from a NaN or infinite velocity or time step gives no box:
-                // the current one stays, valid, rather than the collider leaving the trees.
-                let predicted = Self::soft_ccd_aabb(params, collider, rb);
-                if crate::queries::finite(predicted.mins.iter().chain(predicted.maxs.iter())) {
-                    aabb.merge(&predicted);
-                }
-                let finite = crate::queries::finite(aabb.mins.iter().chain(aabb.maxs.iter()));
-                aabb = aabb.loosened(Self::soft_ccd_reach(params, rb));
-                if finite {
-                    // A finite box loosened past `f32::MAX` (a huge reach near huge
-                    // coordinates) stops there rather than becoming invalid.
-                    return clamped_to_finite(&Aabb::new(aabb.mins, aabb.maxs));
-                }
+                return BoxLanes::load(&Self::with_soft_ccd(params, collider, rb, aabb));
             }
+        }
+        BoxLanes::load_parry(&aabb)
+    }
+
+    /// `collision_aabb`'s box `aabb` for a collider whose parent `rb` has soft CCD: merged
+    /// with the box at the predicted pose and loosened by the soft-CCD reach.
+    #[cold]
+    #[inline(never)]
+    fn with_soft_ccd(
+        params: &IntegrationParameters,
+        collider: &Collider,
+        rb: &RigidBody,
+        mut aabb: rapier3d::parry::bounding_volume::Aabb,
+    ) -> Aabb {
+        // A predicted pose from a NaN or infinite velocity or time step gives no box: the
+        // current one stays, valid, rather than the collider leaving the trees.
+        let predicted = Self::soft_ccd_aabb(params, collider, rb);
+        if crate::queries::finite(predicted.mins.iter().chain(predicted.maxs.iter())) {
+            aabb.merge(&predicted);
+        }
+        let finite = crate::queries::finite(aabb.mins.iter().chain(aabb.maxs.iter()));
+        aabb = aabb.loosened(Self::soft_ccd_reach(params, rb));
+        if finite {
+            // A finite box loosened past `f32::MAX` (a huge reach near huge coordinates) stops
+            // there rather than becoming invalid.
+            return clamped_to_finite(&Aabb::new(aabb.mins, aabb.maxs));
         }
         Aabb::new(aabb.mins, aabb.maxs)
     }
@@ -696,28 +724,29 @@ impl CanopyBroadPhase {
                         // With soft CCD, or a box `written_box` does not give (having seen the
                         // shape already, parry's path then).
                         Written::Unwritten => {
-                            *tight = Self::collision_aabb(
+                            let lanes = Self::collision_lanes(
                                 params,
                                 collider,
                                 parent,
                                 soft_ccd,
                                 &mut self.stats.negative_loosening,
                             );
-                            !p.fat.contains_branchless(tight)
+                            lanes.write(tight);
+                            !lanes.inside(&p.fat)
                         }
                     }
                 } else {
                     // Parry's path keeps its own code: routed through the `match` above,
                     // `spawn_storm` (mixed shapes) took about 3% longer (`tools/ab`).
-                    let tight = Self::collision_aabb(
+                    let lanes = Self::collision_lanes(
                         params,
                         collider,
                         parent,
                         false,
                         &mut self.stats.negative_loosening,
                     );
-                    self.tights[id as usize] = tight;
-                    !p.fat.contains_branchless(&tight)
+                    lanes.write(&mut self.tights[id as usize]);
+                    !lanes.inside(&p.fat)
                 };
                 return Examined::Fast {
                     parent,
