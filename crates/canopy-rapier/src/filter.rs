@@ -9,10 +9,25 @@ use rapier3d::prelude::*;
 /// The inputs of the pair filter for one collider.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct FilterData {
-    pub parent: Option<RigidBodyHandle>,
+    /// The parent body's handle as (index, generation), or [`NO_PARENT`]: two `u32`, where an
+    /// `Option<RigidBodyHandle>` took 12 bytes and made a proxy 68 (see `proxy.rs`).
+    parent: [u32; 2],
     pub body_type: RigidBodyType,
     pub groups: InteractionGroups,
     pub active: ActiveCollisionTypes,
+}
+
+/// [`FilterData::parent`] of a collider without a parent (Rapier's invalid handle, which no
+/// body has).
+const NO_PARENT: [u32; 2] = [u32::MAX; 2];
+
+/// A parent handle as [`FilterData`] stores it.
+#[inline]
+fn packed(parent: Option<RigidBodyHandle>) -> [u32; 2] {
+    parent.map_or(NO_PARENT, |h| {
+        let (index, generation) = h.into_raw_parts();
+        [index, generation]
+    })
 }
 
 impl FilterData {
@@ -20,7 +35,7 @@ impl FilterData {
     #[inline]
     pub fn new(collider: &Collider, parent: Option<&RigidBody>) -> Self {
         Self {
-            parent: collider.parent(),
+            parent: packed(collider.parent()),
             body_type: parent
                 .map(|b| b.body_type())
                 .unwrap_or(RigidBodyType::Fixed),
@@ -34,22 +49,14 @@ impl FilterData {
     /// parent is left to the caller (it sits on another cache line of the body than what the
     /// collision box reads, so the broadphase checks it in a separate pass).
     ///
-    /// Handles and groups are compared as one 64-bit word each (the same equality as the
-    /// derived one, in fewer instructions: this runs once per modified collider per update).
+    /// Groups are compared as one 64-bit word (the same equality as the derived one, in fewer
+    /// instructions: this runs once per modified collider per update).
     #[inline]
     pub fn same_as_but_body_type(&self, collider: &Collider, has_parent: bool) -> bool {
-        let handle = |h: RigidBodyHandle| {
-            let (index, generation) = h.into_raw_parts();
-            u64::from(index) | u64::from(generation) << 32
-        };
         let groups = |g: InteractionGroups| {
             u64::from(g.memberships.bits()) | u64::from(g.filter.bits()) << 32
         };
-        let same_parent = match (self.parent, collider.parent()) {
-            (Some(a), Some(b)) => handle(a) == handle(b),
-            (a, b) => a.is_none() && b.is_none(),
-        };
-        same_parent
+        self.parent == packed(collider.parent())
             && (has_parent || self.body_type == RigidBodyType::Fixed)
             && groups(self.groups) == groups(collider.collision_groups())
             && self.active == collider.active_collision_types()
@@ -58,7 +65,7 @@ impl FilterData {
     /// `true` when the narrow phase could make contacts between the two colliders.
     #[inline]
     pub fn may_pair(&self, other: &FilterData) -> bool {
-        if self.parent.is_some() && self.parent == other.parent {
+        if self.parent != NO_PARENT && self.parent == other.parent {
             return false;
         }
         (self.active.test(self.body_type, other.body_type)
