@@ -64,6 +64,16 @@ impl BoxLanes {
         }
     }
 
+    /// The box enlarged by `amount` on every side with parry's operations (`mins + (-amount)`,
+    /// `maxs + amount`): parry's `loosened`, to the bit.
+    #[inline(always)]
+    pub(crate) fn loosened(self, amount: f32) -> Self {
+        Self {
+            lo: imp::loosen(self.lo, amount, LO_LOWER),
+            hi: imp::loosen(self.hi, amount, HI_LOWER),
+        }
+    }
+
     /// `Aabb::is_valid`: every coordinate finite and `min <= max` on every axis.
     #[inline(always)]
     pub(crate) fn is_valid(self) -> bool {
@@ -142,6 +152,16 @@ mod sse {
 
     /// Per lane: `v - margin` where `lower`, else `v + margin`; then plus `d` where `d` is
     /// finite and negative (`lower` lanes) or finite and not negative (the others).
+    #[inline(always)]
+    pub(crate) fn loosen(v: V, amount: f32, lower: [bool; 4]) -> V {
+        let lower = lane_mask(lower);
+        // SAFETY: SSE2 is part of the x86_64 baseline; no memory is touched.
+        unsafe {
+            let sign = _mm_and_ps(lower, _mm_set1_ps(-0.0));
+            _mm_add_ps(v, _mm_xor_ps(_mm_set1_ps(amount), sign))
+        }
+    }
+
     #[inline(always)]
     pub(crate) fn fatten(v: V, margin: f32, d: [f32; 4], lower: [bool; 4]) -> V {
         let lower = lane_mask(lower);
@@ -240,6 +260,17 @@ mod portable {
                 (c[i] - h[i]) - pad
             } else {
                 (c[i] + h[i]) + pad
+            }
+        })
+    }
+
+    #[inline(always)]
+    pub(crate) fn loosen(v: V, amount: f32, lower: [bool; 4]) -> V {
+        std::array::from_fn(|i| {
+            if lower[i] {
+                v[i] + -amount
+            } else {
+                v[i] + amount
             }
         })
     }
@@ -372,6 +403,28 @@ mod tests {
             let want = Aabb::from_arrays(mins, maxs);
             prop_assert_eq!(bits(&BoxLanes::load_parry(&parry).to_aabb()), bits(&want));
             let (lo, hi) = portable::load_parry(&parry);
+            let mut out = Aabb::EMPTY;
+            portable::write(lo, hi, &mut out);
+            prop_assert_eq!(bits(&out), bits(&want));
+        }
+
+        /// `loosened` is parry's `loosened`, to the bit, on both implementations.
+        #[test]
+        fn loosened_is_parrys(
+            mins in prop::array::uniform3(coord()),
+            maxs in prop::array::uniform3(coord()),
+            amount in 0.0f32..10.0,
+        ) {
+            use rapier3d::parry::bounding_volume::BoundingVolume;
+            let parry = ParryAabb::new(mins.into(), maxs.into());
+            let want = parry.loosened(amount);
+            let want = Aabb::new(want.mins, want.maxs);
+            prop_assert_eq!(bits(&BoxLanes::load_parry(&parry).loosened(amount).to_aabb()), bits(&want));
+            let (lo, hi) = portable::load_parry(&parry);
+            let (lo, hi) = (
+                portable::loosen(lo, amount, LO_LOWER),
+                portable::loosen(hi, amount, HI_LOWER),
+            );
             let mut out = Aabb::EMPTY;
             portable::write(lo, hi, &mut out);
             prop_assert_eq!(bits(&out), bits(&want));

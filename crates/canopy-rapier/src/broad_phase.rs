@@ -566,6 +566,39 @@ impl CanopyBroadPhase {
     ) -> BoxLanes {
         let prediction = params.prediction_distance() / 2.0;
         let amount = collider.contact_skin() + prediction;
+        let negative = amount.is_nan() || amount < 0.0;
+        let soft_ccd = parent.is_some_and(|rb| rb.soft_ccd_prediction() > 0.0);
+        if negative || soft_ccd {
+            return BoxLanes::load(&Self::unusual_collision_aabb(
+                params,
+                collider,
+                parent,
+                written_out,
+                negative_loosening,
+            ));
+        }
+        if written_out {
+            BoxLanes::load_parry(&crate::shape_box::collision_box(collider, prediction))
+        } else {
+            // `Collider::compute_collision_aabb`'s operations without its call: the shape's box,
+            // loosened in the lanes.
+            BoxLanes::load_parry(&collider.shape().compute_aabb(collider.position()))
+                .loosened(amount)
+        }
+    }
+
+    /// `collision_aabb` where the loosening is negative or NaN, or the parent has soft CCD.
+    #[cold]
+    #[inline(never)]
+    fn unusual_collision_aabb(
+        params: &IntegrationParameters,
+        collider: &Collider,
+        parent: Option<&RigidBody>,
+        written_out: bool,
+        negative_loosening: &mut usize,
+    ) -> Aabb {
+        let prediction = params.prediction_distance() / 2.0;
+        let amount = collider.contact_skin() + prediction;
         let aabb = if amount.is_nan() || amount < 0.0 {
             *negative_loosening += 1;
             Self::unloosened_aabb(collider)
@@ -574,12 +607,12 @@ impl CanopyBroadPhase {
         } else {
             collider.compute_collision_aabb(prediction)
         };
-        if let Some(rb) = parent {
-            if rb.soft_ccd_prediction() > 0.0 {
-                return BoxLanes::load(&Self::with_soft_ccd(params, collider, rb, aabb));
+        match parent {
+            Some(rb) if rb.soft_ccd_prediction() > 0.0 => {
+                Self::with_soft_ccd(params, collider, rb, aabb)
             }
+            _ => Aabb::new(aabb.mins, aabb.maxs),
         }
-        BoxLanes::load_parry(&aabb)
     }
 
     /// `collision_aabb`'s box `aabb` for a collider whose parent `rb` has soft CCD: merged
