@@ -20,7 +20,8 @@
 //! update's median time and sums them by kind of canopy update: none moved, few moved (one
 //! query per moved proxy), many moved (at least one proxy in eight: marked pair walks), and
 //! those with a tree rebuild; and again by which of the step's two calls it is (the user's
-//! changes, or the positions after the integration). It shows where canopy's time goes against
+//! changes, or the positions after the integration), and by tenth of the recording (how the
+//! ratio evolves through the scene). It shows where canopy's time goes against
 //! Rapier's, which the totals of `ab` and of the criterion bench hide (`spawn_storm`: the
 //! updates where the first layers fall together cost canopy more than Rapier).
 
@@ -211,6 +212,8 @@ fn split(
     // By which of the step's two calls it is: the recording's update `i + 1`, whose call within
     // its step is `(i + 1) % 2` (0: the user's changes, 1: after the integration).
     let mut by_call = [(0usize, 0.0f64, 0.0f64); 2];
+    // By tenth of the recording: how the ratio evolves through the scene.
+    let mut by_tenth = [(0usize, 0.0f64, 0.0f64); 10];
     for i in 0..rest.len() {
         let median = |k: fn(&(f64, f64, usize)) -> f64| {
             let mut v: Vec<f64> = runs.iter().map(|r| k(&r[i])).collect();
@@ -219,7 +222,11 @@ fn split(
         };
         let (r, c) = (median(|x| x.0), median(|x| x.1));
         // The kind is the same in every repetition (the updates are deterministic).
-        for s in [&mut sums[runs[0][i].2], &mut by_call[(i + 1) % 2]] {
+        for s in [
+            &mut sums[runs[0][i].2],
+            &mut by_call[(i + 1) % 2],
+            &mut by_tenth[i * 10 / rest.len()],
+        ] {
             s.0 += 1;
             s.1 += r;
             s.2 += c;
@@ -242,6 +249,11 @@ fn split(
     rows(&KINDS, &sums);
     println!("  by call:");
     rows(&CALLS, &by_call);
+    println!("  by tenth of the recording:");
+    const TENTHS: [&str; 10] = [
+        "1st", "2nd", "3rd", "4th", "5th", "6th", "7th", "8th", "9th", "10th",
+    ];
+    rows(&TENTHS, &by_tenth);
     println!(
         "  {:>12}: rapier {:8.2} ms, canopy {:8.2} ms, ratio {:5.2}",
         "all",
