@@ -40,10 +40,11 @@ impl BoxLanes {
         Self { lo, hi }
     }
 
-    /// The lanes of a box parry just returned, read as `Collider::compute_collision_aabb`
-    /// writes its result (16 bytes, then 8): a load that straddled those two stores (as
-    /// copying the box into an [`Aabb`] did) could not take its data from them and waited for
-    /// both to reach the cache, twice per collider in the examine loop.
+    /// The lanes of a box parry just returned, read as parry's functions write a returned box
+    /// (`Shape::compute_aabb` of balls, cuboids and capsules, `Collider::compute_collision_aabb`:
+    /// 16 bytes, then 8): a load that straddled those two stores (as copying the box into an
+    /// [`Aabb`] did) could not take its data from them and waited for both to reach the cache,
+    /// twice per collider in the examine loop.
     #[inline(always)]
     pub(crate) fn load_parry(a: &ParryAabb) -> Self {
         let (lo, hi) = imp::load_parry(a);
