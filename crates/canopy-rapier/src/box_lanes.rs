@@ -151,8 +151,7 @@ mod sse {
         }
     }
 
-    /// Per lane: `v - margin` where `lower`, else `v + margin`; then plus `d` where `d` is
-    /// finite and negative (`lower` lanes) or finite and not negative (the others).
+    /// Per lane: `v + (-amount)` where `lower`, else `v + amount` (parry's `loosened`).
     #[inline(always)]
     pub(crate) fn loosen(v: V, amount: f32, lower: [bool; 4]) -> V {
         let lower = lane_mask(lower);
@@ -163,6 +162,8 @@ mod sse {
         }
     }
 
+    /// Per lane: `v - margin` where `lower`, else `v + margin`; then plus `d` where `d` is
+    /// finite and negative (`lower` lanes) or finite and not negative (the others).
     #[inline(always)]
     pub(crate) fn fatten(v: V, margin: f32, d: [f32; 4], lower: [bool; 4]) -> V {
         let lower = lane_mask(lower);
