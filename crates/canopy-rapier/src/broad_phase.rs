@@ -574,6 +574,8 @@ impl CanopyBroadPhase {
                 collider,
                 parent,
                 written_out,
+                prediction,
+                negative,
                 negative_loosening,
             ));
         }
@@ -587,7 +589,9 @@ impl CanopyBroadPhase {
         }
     }
 
-    /// `collision_aabb` where the loosening is negative or NaN, or the parent has soft CCD.
+    /// `collision_aabb` where the loosening is negative or NaN (`negative`), or the parent has
+    /// soft CCD; `prediction` is half the prediction distance, as `collision_lanes` found both.
+    #[allow(clippy::too_many_arguments)]
     #[cold]
     #[inline(never)]
     fn unusual_collision_aabb(
@@ -595,11 +599,11 @@ impl CanopyBroadPhase {
         collider: &Collider,
         parent: Option<&RigidBody>,
         written_out: bool,
+        prediction: f32,
+        negative: bool,
         negative_loosening: &mut usize,
     ) -> Aabb {
-        let prediction = params.prediction_distance() / 2.0;
-        let amount = collider.contact_skin() + prediction;
-        let aabb = if amount.is_nan() || amount < 0.0 {
+        let aabb = if negative {
             *negative_loosening += 1;
             Self::unloosened_aabb(collider)
         } else if written_out {
