@@ -5,6 +5,8 @@
 //!   filtered; found with parry's own BVH) is live in canopy's pair set: zero false negatives.
 //! * The simulations stay physically equivalent: the same bodies end up in the same places.
 //! * The events are the same with 1 and with 2 rayon threads.
+//! * After every update, canopy's candidate pairs are exactly the pairs whose fat boxes overlap
+//!   and that the filter passes (checked against all pairs).
 
 use canopy::rapier::CanopyBroadPhase;
 use canopy::scenes::harness::{handle_pair, HandlePair, Instrumented};
@@ -109,10 +111,27 @@ fn simulations_are_physically_equivalent() {
     }
 }
 
-/// A broadphase wrapper that logs every event.
+/// A broadphase wrapper that logs every event and, with `check_candidates`, compares the
+/// candidate pairs with all pairs of fat boxes after every update.
 struct Logged {
     inner: CanopyBroadPhase,
     log: Vec<(bool, HandlePair)>,
+    check_candidates: bool,
+    /// Updates after which the candidates were checked, and the first wrong candidates found.
+    checked_updates: usize,
+    wrong: Vec<String>,
+}
+
+impl Logged {
+    fn new(check_candidates: bool) -> Self {
+        Self {
+            inner: CanopyBroadPhase::new(),
+            log: Vec::new(),
+            check_candidates,
+            checked_updates: 0,
+            wrong: Vec::new(),
+        }
+    }
 }
 
 impl BroadPhase for Logged {
@@ -134,6 +153,36 @@ impl BroadPhase for Logged {
                 BroadPhasePairEvent::DeletePair(p) => (false, (p.collider1, p.collider2)),
             });
         }
+        if self.check_candidates {
+            self.checked_updates += 1;
+            if self.wrong.len() < 8 {
+                let update = self.checked_updates;
+                self.wrong
+                    .extend(self.inner.candidate_mismatches().into_iter().take(8).map(
+                        |(a, b, missing)| {
+                            let what = if missing { "missing" } else { "extra" };
+                            format!("update {update}: {what} candidate {a:?} {b:?}")
+                        },
+                    ));
+            }
+        }
+    }
+}
+
+#[test]
+fn candidates_are_the_overlapping_fat_boxes_in_every_scene() {
+    for &name in SCENE_NAMES {
+        let mut w = World::new(scene(name, Size::Small).unwrap(), Logged::new(true));
+        w.step_n(STEPS);
+        let bp = &w.broad_phase;
+        assert_eq!(bp.checked_updates, 2 * STEPS, "{name}");
+        assert!(bp.wrong.is_empty(), "{name}: {:#?}", bp.wrong);
+        if name != "many_sleep" && name != "many_kinematics" {
+            assert!(
+                bp.inner.stats().candidates > 0,
+                "{name}: no candidates at the end, the test proves little"
+            );
+        }
     }
 }
 
@@ -145,11 +194,7 @@ fn events_are_the_same_with_one_and_two_threads() {
             .build()
             .unwrap();
         pool.install(|| {
-            let bp = Logged {
-                inner: CanopyBroadPhase::new(),
-                log: Vec::new(),
-            };
-            let mut w = World::new(scene(name, Size::Small).unwrap(), bp);
+            let mut w = World::new(scene(name, Size::Small).unwrap(), Logged::new(false));
             w.step_n(60);
             w.broad_phase.log
         })

@@ -440,6 +440,33 @@ impl CanopyBroadPhase {
         p.is_valid().then_some(p.fat)
     }
 
+    /// For tests: the pairs of colliders in the broadphase whose candidate status is wrong,
+    /// each with `true` when it is missing (fat boxes overlapping and the filter passing, not a
+    /// candidate) and `false` when it should not be one. Every pair of proxies is checked, so
+    /// this costs time quadratic in the number of colliders; it allocates. Empty between
+    /// updates of a correct broadphase.
+    #[doc(hidden)]
+    pub fn candidate_mismatches(&self) -> Vec<(ColliderHandle, ColliderHandle, bool)> {
+        let valid: Vec<(u32, &Proxy)> = self
+            .proxies
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| Some((i as u32, p.as_ref().filter(|p| p.is_valid())?)))
+            .collect();
+        let mut wrong = Vec::new();
+        for (k, &(a, pa)) in valid.iter().enumerate() {
+            let partners = self.pairs.partners(a);
+            for &(b, pb) in &valid[k + 1..] {
+                let should = pa.fat.intersects(&pb.fat) && pa.filter.may_pair(&pb.filter);
+                let is = partners.iter().any(|e| e.other == b);
+                if should != is {
+                    wrong.push((pa.handle, pb.handle, should));
+                }
+            }
+        }
+        wrong
+    }
+
     fn proxy_id(&self, handle: ColliderHandle) -> Option<u32> {
         self.proxy(handle).map(|_| handle.into_raw_parts().0)
     }

@@ -1,10 +1,13 @@
 //! The Rapier broadphase contract, tested on random worlds under random edits: after every
 //! update, every pair the narrow phase needs (collision boxes overlap, not filtered) is live;
 //! no live pair involves a removed or disabled collider or is filtered; the event stream
-//! replays to exactly the live pair set; and the events are the same with 1 and 2 threads.
+//! replays to exactly the live pair set; the candidate pairs are exactly the pairs of fat boxes
+//! that overlap and pass the filter; and the events are the same with 1 and 2 threads.
 //!
 //! The truth is brute force over all collider pairs, with Rapier's filter rules as restated
-//! (independently of `filter.rs`) by the measuring harness's `narrow_phase_filter`.
+//! (independently of `filter.rs`) by the measuring harness's `narrow_phase_filter`. The
+//! candidate check (`CanopyBroadPhase::candidate_mismatches`) is brute force over all proxy
+//! pairs too, with the broadphase's own filter: it checks the pair search, not the filter.
 
 use canopy_rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig, ConfigError};
 use canopy_scenes::harness::{handle_pair, narrow_phase_filter, HandlePair};
@@ -91,6 +94,14 @@ impl BroadPhase for Checked {
                     self.log.push((false, k));
                 }
             }
+        }
+        // Candidates: exactly the pairs whose fat boxes overlap and that the filter passes.
+        for (a, b, missing) in self.inner.candidate_mismatches().into_iter().take(4) {
+            self.violations.push(format!(
+                "update {}: candidate {a:?} {b:?} {}",
+                self.updates,
+                if missing { "missing" } else { "extra" }
+            ));
         }
         let live: HashSet<Pair> = self.inner.pairs().map(|(a, b)| handle_pair(a, b)).collect();
         if live != self.replay {
