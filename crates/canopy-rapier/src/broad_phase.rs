@@ -224,6 +224,8 @@ struct Scratch {
     /// its partner list.
     parted: Vec<(u32, u32)>,
     flips: Vec<(u32, u32)>,
+    /// Steps 4 and 5 when many moved: a bitmap of the moved proxy ids.
+    moved_bits: Vec<u64>,
 }
 
 /// The inputs of step 2 (`examine_all`).
@@ -1496,9 +1498,17 @@ impl CanopyBroadPhase {
         // The walks met every candidate of a moved proxy that goes on (fat boxes overlapping,
         // filter passing): those are marked met on the moved side, and the moved proxies'
         // other candidates ended. Only the pairs that are not candidates yet stay in `found`.
-        let (proxies, pairs) = (&self.proxies, &mut self.pairs);
-        let is_moved = |id: u32| proxies[id as usize].as_ref().is_some_and(|p| p.moved);
+        // Which proxies moved, as a bitmap (a few KB, cached) rather than their records.
+        let mut moved_bits = std::mem::take(&mut self.scratch.moved_bits);
+        moved_bits.clear();
+        moved_bits.resize(self.proxies.len().div_ceil(64), 0);
+        for &id in moved {
+            moved_bits[id as usize / 64] |= 1 << (id % 64);
+        }
+        let is_moved = |id: u32| moved_bits[id as usize / 64] & (1 << (id % 64)) != 0;
+        let pairs = &mut self.pairs;
         found.retain(|&(a, b)| !pairs.mark_met(a, b, is_moved(a), is_moved(b)));
+        self.scratch.moved_bits = moved_bits;
         // Every marked list is read here (`moved` holds each id once: `mark_moved`).
         for &id in moved {
             self.pairs.take_unmet(id, &mut gone);
