@@ -596,12 +596,13 @@ impl CanopyBroadPhase {
         let prediction = params.prediction_distance() / 2.0;
         let amount = collider.contact_skin() + prediction;
         let negative = amount.is_nan() || amount < 0.0;
-        let soft_ccd = parent.is_some_and(|rb| rb.soft_ccd_prediction() > 0.0);
-        if negative || soft_ccd {
+        // The parent, when it has soft CCD.
+        let soft_ccd = parent.filter(|rb| rb.soft_ccd_prediction() > 0.0);
+        if negative || soft_ccd.is_some() {
             return BoxLanes::load(&Self::unusual_collision_aabb(
                 params,
                 collider,
-                parent,
+                soft_ccd,
                 written_out,
                 prediction,
                 negative,
@@ -619,14 +620,15 @@ impl CanopyBroadPhase {
     }
 
     /// `collision_aabb` where the loosening is negative or NaN (`negative`), or the parent has
-    /// soft CCD; `prediction` is half the prediction distance, as `collision_lanes` found both.
+    /// soft CCD (`soft_ccd`: that parent); `prediction` is half the prediction distance, as
+    /// `collision_lanes` found all three.
     #[allow(clippy::too_many_arguments)]
     #[cold]
     #[inline(never)]
     fn unusual_collision_aabb(
         params: &IntegrationParameters,
         collider: &Collider,
-        parent: Option<&RigidBody>,
+        soft_ccd: Option<&RigidBody>,
         written_out: bool,
         prediction: f32,
         negative: bool,
@@ -640,11 +642,9 @@ impl CanopyBroadPhase {
         } else {
             collider.compute_collision_aabb(prediction)
         };
-        match parent {
-            Some(rb) if rb.soft_ccd_prediction() > 0.0 => {
-                Self::with_soft_ccd(params, collider, rb, aabb)
-            }
-            _ => Aabb::new(aabb.mins, aabb.maxs),
+        match soft_ccd {
+            Some(rb) => Self::with_soft_ccd(params, collider, rb, aabb),
+            None => Aabb::new(aabb.mins, aabb.maxs),
         }
     }
 
