@@ -172,6 +172,14 @@ fn neighbours_often_differ<T: Copy>(v: &[T], differ: impl Fn(T, T) -> bool) -> b
     count > SAMPLES / 4
 }
 
+/// Whether bit `i` of the bitmap `words` is set (bits past its end are not).
+#[inline]
+fn has_bit(words: &[u64], i: u32) -> bool {
+    words
+        .get(i as usize / 64)
+        .is_some_and(|w| w & (1 << (i % 64)) != 0)
+}
+
 /// The set bits of a bitmap, in order (the examine loop walks its words by hand instead,
 /// which measured faster there).
 struct SetBits<'a> {
@@ -1442,11 +1450,7 @@ impl CanopyBroadPhase {
             }
             return;
         }
-        let reported = |id: u32| {
-            modified
-                .get(id as usize / 64)
-                .is_some_and(|w| w & (1 << (id % 64)) != 0)
-        };
+        let reported = |id: u32| has_bit(modified, id);
         for id in SetBits::new(modified) {
             if self.pairs.waiting(id) == 0 {
                 continue;
@@ -1505,7 +1509,7 @@ impl CanopyBroadPhase {
         for &id in moved {
             moved_bits[id as usize / 64] |= 1 << (id % 64);
         }
-        let is_moved = |id: u32| moved_bits[id as usize / 64] & (1 << (id % 64)) != 0;
+        let is_moved = |id: u32| has_bit(&moved_bits, id);
         let pairs = &mut self.pairs;
         found.retain(|&(a, b)| !pairs.mark_met(a, b, is_moved(a), is_moved(b)));
         self.scratch.moved_bits = moved_bits;
