@@ -8,10 +8,15 @@
 //!   `self_pairs/{n}/canopy_par` (`par_self_pairs`, which also collects the pairs in a `Vec`);
 //! * `rays/{n}/parry` and `rays/{n}/canopy`: 100k long rays (origins inside the scene, random
 //!   directions, `t_max` the scene's diagonal), closest hit, with the exact ray-box test of the
-//!   primitive's box in the callback; single thread.
+//!   primitive's box in the callback; single thread;
+//! * `overlaps/{n}/parry` (`intersect_aabb`) and `overlaps/{n}/canopy` (`for_each_overlap`):
+//!   10k box queries, each a box of the set grown to twice its size about its centre (a
+//!   broadphase's fat-box query: the box itself and its neighbours), counting the hits; single
+//!   thread.
 //!
-//! Before the timings of each size it checks and prints that both libraries find the same pairs
-//! and the same ray hits (same hit count, same nearest time up to a relative 1e-5).
+//! Before the timings of each size it checks and prints that both libraries find the same pairs,
+//! the same ray hits (same hit count, same nearest time up to a relative 1e-5) and the same
+//! primitives for every box query.
 
 mod common;
 
@@ -30,6 +35,8 @@ const SEED: u64 = 0x5eed_0001;
 const RAY_SEED: u64 = 0x5eed_0002;
 /// Rays cast per iteration of the ray benchmarks.
 const RAYS: usize = 100_000;
+/// Box queries per iteration of the overlap benchmarks.
+const BOX_QUERIES: usize = 10_000;
 
 /// Everything the benchmarks of one size need.
 struct Scene {
@@ -40,6 +47,9 @@ struct Scene {
     rays: Vec<Ray>,
     prays: Vec<parry3d::query::Ray>,
     t_max: f32,
+    /// The box queries (every `n / BOX_QUERIES`-th box, doubled about its centre).
+    queries: Vec<Aabb>,
+    pqueries: Vec<parry3d::bounding_volume::Aabb>,
 }
 
 impl Scene {
@@ -51,6 +61,16 @@ impl Scene {
         let bounds = canopy.root_aabb().expect("a non-empty tree");
         let rays = random_rays(RAYS, RAY_SEED, &bounds);
         let prays = rays_to_parry(&rays);
+        let step = (n / BOX_QUERIES).max(1);
+        let queries: Vec<Aabb> = boxes
+            .iter()
+            .step_by(step)
+            .map(|b| {
+                let (c, h) = (b.center(), (b.max - b.min) * 0.5);
+                Aabb::new(c - h * 2.0, c + h * 2.0)
+            })
+            .collect();
+        let pqueries = to_parry(&queries);
         Self {
             boxes,
             pboxes,
@@ -59,7 +79,17 @@ impl Scene {
             rays,
             prays,
             t_max: diagonal(&bounds),
+            queries,
+            pqueries,
         }
+    }
+
+    fn parry_overlaps(&self, i: usize) -> impl Iterator<Item = u32> + '_ {
+        self.parry.intersect_aabb(&self.pqueries[i])
+    }
+
+    fn canopy_overlaps(&self, i: usize, mut f: impl FnMut(u32)) {
+        self.canopy.for_each_overlap(&self.queries[i], &mut f);
     }
 
     fn parry_pair_count(&self, ws: &mut BvhWorkspace) -> usize {
@@ -158,6 +188,21 @@ impl Scene {
             self.rays.len(),
             self.t_max
         );
+        let mut hits = 0usize;
+        for i in 0..self.queries.len() {
+            let mut p: Vec<u32> = self.parry_overlaps(i).collect();
+            let mut c = Vec::new();
+            self.canopy_overlaps(i, |k| c.push(k));
+            p.sort_unstable();
+            c.sort_unstable();
+            assert_eq!(p, c, "box query {i}: parry and canopy find different boxes");
+            hits += c.len();
+        }
+        println!(
+            "{label:>5}: box queries: {}, {:.2} hits each",
+            self.queries.len(),
+            hits as f64 / self.queries.len() as f64
+        );
         assert_eq!(parry_hits, canopy_hits, "ray hit counts differ");
         assert_eq!(both, canopy_hits, "the rays hit differ");
         assert_eq!(t_mismatch, 0, "nearest hit times differ");
@@ -202,6 +247,31 @@ fn bench_queries(c: &mut Criterion) {
                     (0..s.rays.len())
                         .filter_map(|i| s.canopy_ray(i))
                         .fold((0usize, 0.0f32), |(k, sum), (_, t)| (k + 1, sum + t))
+                })
+            })
+        });
+        g.finish();
+
+        let mut g = c.benchmark_group(format!("overlaps/{n}"));
+        configure_group(&mut g, n);
+        g.throughput(Throughput::Elements(scene.queries.len() as u64));
+        g.bench_function("parry", |b| {
+            b.iter(|| {
+                let s = black_box(&scene);
+                (0..s.queries.len())
+                    .map(|i| s.parry_overlaps(i).count())
+                    .sum::<usize>()
+            })
+        });
+        g.bench_function("canopy", |b| {
+            pool.install(|| {
+                b.iter(|| {
+                    let s = black_box(&scene);
+                    let mut k = 0usize;
+                    for i in 0..s.queries.len() {
+                        s.canopy_overlaps(i, |_| k += 1);
+                    }
+                    k
                 })
             })
         });

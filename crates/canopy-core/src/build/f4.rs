@@ -149,6 +149,17 @@ mod imp {
             unsafe { _mm_movemask_ps(self.0) as u32 }
         }
     }
+
+    /// Bit `i` set when `words[i] == v`: one SSE2 compare for four words.
+    #[inline(always)]
+    pub(crate) fn eq_bits(words: &[u32; 4], v: u32) -> u32 {
+        // SAFETY: SSE2 is part of the x86_64 baseline; the load reads the 16 bytes of `words`.
+        unsafe {
+            let w = _mm_loadu_si128(words.as_ptr() as *const __m128i);
+            let eq = _mm_cmpeq_epi32(w, _mm_set1_epi32(v as i32));
+            _mm_movemask_ps(_mm_castsi128_ps(eq)) as u32
+        }
+    }
 }
 
 #[cfg(not(target_arch = "x86_64"))]
@@ -273,9 +284,15 @@ mod imp {
             (0..4).fold(0, |m, i| m | ((self.0[i].to_bits() >> 31) << i))
         }
     }
+
+    /// Bit `i` set when `words[i] == v`.
+    #[inline(always)]
+    pub(crate) fn eq_bits(words: &[u32; 4], v: u32) -> u32 {
+        (0..4).fold(0, |m, i| m | (((words[i] == v) as u32) << i))
+    }
 }
 
-pub(crate) use imp::F4;
+pub(crate) use imp::{eq_bits, F4};
 
 use crate::aabb::Aabb;
 use crate::bvh::{Node, PrimBounds};
@@ -366,6 +383,9 @@ mod tests {
         assert_eq!(a.rot::<1>().to_array(), [2.0, 3.0, 4.0, 1.0]);
         assert_eq!(a.rot::<2>().to_array(), [3.0, 4.0, 1.0, 2.0]);
         assert_eq!(a.rot::<3>().to_array(), [4.0, 1.0, 2.0, 3.0]);
+        assert_eq!(super::eq_bits(&[7, u32::MAX, 7, 1], 7), 0b0101);
+        assert_eq!(super::eq_bits(&[7, u32::MAX, 7, 1], u32::MAX), 0b0010);
+        assert_eq!(super::eq_bits(&[7, u32::MAX, 7, 1], 2), 0);
         assert_eq!(a.le(b).and(b.le(a)).bits(), 0);
         assert_eq!(a.le(a).and(b.le(b)).bits(), 0b1111);
     }
