@@ -1,8 +1,8 @@
 //! One tree of proxies (fixed, kinematic or dynamic): a canopy-core [`Bvh`] over fat boxes,
-//! a pending list (with a small tree, refit or rebuilt every update) for proxies added since
-//! the last build, and dead slots for proxies removed since then. Refit when boxes change;
-//! rebuilt when the pending list or the dead slots grow too large, or the SAH cost has drifted
-//! (see [`crate::RebuildPolicy`]).
+//! a pending list for proxies added since the last build (with a small tree, refit or rebuilt
+//! every update, unless the list is short enough to scan), and dead slots for proxies removed
+//! since then. Refit when boxes change; rebuilt when the pending list or the dead slots grow
+//! too large, or the SAH cost has drifted (see [`crate::RebuildPolicy`]).
 
 use crate::config::RebuildPolicy;
 use crate::filter::TreeFilterSummary;
@@ -12,6 +12,9 @@ use rapier3d::na::Point3;
 
 /// Refits between two comparisons of the SAH cost with the cost after the last build.
 const COST_CHECK_INTERVAL: u32 = 4;
+
+/// Pending lists of at most this many proxies get no tree: their boxes are scanned.
+const SCANNED_PENDING: usize = 4;
 
 /// Marks a slot whose proxy has left the tree.
 pub(crate) const DEAD: u32 = u32::MAX;
@@ -109,7 +112,9 @@ impl ProxyTree {
         parallel: bool,
     ) {
         self.maintain_members(proxies, policy, builder, parallel);
-        if self.pending.is_empty() {
+        if self.pending.len() <= SCANNED_PENDING {
+            // Scanned, not queried (a lone ground's pending tree cost each dynamic proxy's
+            // query about 37 ns, the scan of its box a few).
             self.pending_fresh = false;
             self.pending_dirty = false;
             self.pending_changes.clear();
