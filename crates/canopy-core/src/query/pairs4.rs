@@ -12,7 +12,10 @@
 //! lane pairs, two interior lanes push a task, two one-primitive leaves are reported, a leaf
 //! against an interior lane becomes a query of each of the leaf's primitives down that
 //! subtree, and two leaves compare their primitives. In a tree larger than the caches the
-//! tasks pass through a small window that prefetches their nodes a few tasks ahead.
+//! tasks pass through a small window that prefetches their nodes a few tasks ahead. The
+//! primitive tests take no branch on their outcome (nor on the marks): every pair tested is
+//! written to a small buffer that advances only when the boxes overlap and a side is marked,
+//! and the buffer goes to the callback when full and at the end of the walk.
 
 use super::ray::{Node4, Ray4, INTERIOR};
 use super::{prefetch, prefetch_node};
@@ -108,11 +111,8 @@ fn lane_box(n: &Node4, lane: usize) -> (F4, F4) {
     )
 }
 
-/// Reports the pair of primitives `a` and `b` (different), smaller index first.
-#[inline(always)]
-fn report(a: u32, b: u32, f: &mut impl FnMut(u32, u32)) {
-    f(a.min(b), a.max(b));
-}
+/// Pairs a walk gathers before handing them to its callback (see [`Walk::emit`]).
+const PAIR_BUFFER: usize = 64;
 
 /// Number of tasks taken off the stack ahead of their turn, so that the lines they read are
 /// on their way while the tasks before them run.
@@ -194,10 +194,34 @@ struct Walk<'a, F, M> {
     /// Whether tasks go through the prefetch window (large trees) rather than being prefetched
     /// as they are pushed.
     ahead: bool,
+    /// Pairs waiting for `f` (`pairs[..waiting]`), smaller index first; see [`Walk::emit`].
+    pairs: [(u32, u32); PAIR_BUFFER],
+    waiting: usize,
     f: F,
 }
 
 impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
+    /// Writes the pair of primitives `a` and `b` (different) at the end of the pair buffer and
+    /// keeps it when `hit`: the leaves' tests take no branch on their outcome, which no
+    /// predictor guesses where boxes crowd. The buffer goes to `f` when full and at the end of
+    /// the walk, in the order the pairs were kept.
+    #[inline(always)]
+    fn emit(&mut self, a: u32, b: u32, hit: bool) {
+        self.pairs[self.waiting] = (a.min(b), a.max(b));
+        self.waiting += hit as usize;
+        if self.waiting == PAIR_BUFFER {
+            self.flush();
+        }
+    }
+
+    /// Hands the waiting pairs to `f`.
+    fn flush(&mut self) {
+        for &(a, b) in &self.pairs[..self.waiting] {
+            (self.f)(a, b);
+        }
+        self.waiting = 0;
+    }
+
     /// Pushes the task of nodes `a` and `b` (prefetching them now unless the window will).
     #[inline(always)]
     fn push(&mut self, a: u32, b: u32) {
@@ -353,7 +377,7 @@ impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
                 if na.meta[i] == 1 && nb.meta[j] == 1 {
                     // One-primitive leaves have their primitive's box, seen to overlap (and
                     // one of the two is marked).
-                    report(na.first[i], nb.first[j], &mut self.f);
+                    self.emit(na.first[i], nb.first[j], true);
                 } else {
                     self.leaf_leaf(na, i, mi, nb, j, mj);
                 }
@@ -368,13 +392,11 @@ impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
             let (plo, phi) = prim_box(&t.prim_bounds[s]);
             let ms = self.marks.slot(s);
             for u in s + 1..first + count {
-                if !M::ALL && !ms && !self.marks.slot(u) {
-                    continue;
-                }
+                // With a marked side (no branch on the marks either).
+                let marked = M::ALL || ms | self.marks.slot(u);
                 let (ulo, uhi) = prim_box(&t.prim_bounds[u]);
-                if overlap(plo, phi, ulo, uhi) {
-                    report(t.prim_indices[s], t.prim_indices[u], &mut self.f);
-                }
+                let hit = overlap(plo, phi, ulo, uhi) & marked;
+                self.emit(t.prim_indices[s], t.prim_indices[u], hit);
             }
         }
     }
@@ -415,13 +437,11 @@ impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
             let ((plo, phi), ip) = get(na, i, sa, s);
             let ms = M::ALL || marked(sa, s, mi);
             for u in rb.clone() {
-                if !ms && !marked(sb, u, mj) {
-                    continue;
-                }
+                // With a marked side (no branch on the marks either).
+                let with_mark = ms | marked(sb, u, mj);
                 let ((ulo, uhi), iu) = get(nb, j, sb, u);
-                if overlap(plo, phi, ulo, uhi) {
-                    report(ip, iu, &mut self.f);
-                }
+                let hit = overlap(plo, phi, ulo, uhi) & with_mark;
+                self.emit(ip, iu, hit);
             }
         }
     }
@@ -476,16 +496,14 @@ impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
                         self.qstack.push(x);
                     }
                 } else if meta == 1 {
-                    report(ip, first, &mut self.f);
+                    self.emit(ip, first, true);
                 } else {
                     for s in first as usize..first as usize + meta as usize {
-                        if !M::ALL && !pm && !self.marks.slot(s) {
-                            continue;
-                        }
+                        // An unmarked `ip` reports marked primitives only (no branch on it).
+                        let marked = M::ALL || pm | self.marks.slot(s);
                         let (ulo, uhi) = prim_box(&t.prim_bounds[s]);
-                        if overlap(pbox.0, pbox.1, ulo, uhi) {
-                            report(ip, t.prim_indices[s], &mut self.f);
-                        }
+                        let hit = overlap(pbox.0, pbox.1, ulo, uhi) & marked;
+                        self.emit(ip, t.prim_indices[s], hit);
                     }
                 }
             }
@@ -560,9 +578,12 @@ fn walk<M: LaneMarks>(
         tasks: Vec::with_capacity(256),
         qstack: Vec::with_capacity(64),
         ahead,
+        pairs: [(0, 0); PAIR_BUFFER],
+        waiting: 0,
         f,
     };
     w.run(nodes);
+    w.flush();
 }
 
 /// The lane marks of `t`'s four-wide copy for the primitive marks `slots` (per slot) and
