@@ -340,6 +340,11 @@ pub struct CanopyBroadPhase {
     pub(crate) trees: [ProxyTree; 3],
     pairs: PairSet,
     moved: Vec<u32>,
+    /// Per tree (by mobility): some BVH member of that tree is in `moved`, and some pending
+    /// proxy of it (set by `mark_moved`, cleared at the end of each update; a rebuild turns the
+    /// second into the first).
+    moved_members: [bool; 3],
+    moved_pending: [bool; 3],
     stats: BroadPhaseStats,
     /// Number of proxies whose `active_collision_types` allow fixed-fixed contacts.
     fixed_fixed: usize,
@@ -560,6 +565,12 @@ impl CanopyBroadPhase {
     fn mark_moved(&mut self, id: u32) {
         self.mirror.touch(id);
         if let Some(p) = self.proxies[id as usize].as_mut() {
+            // Before the `moved` check: a second examination may have moved it to another tree.
+            match p.loc {
+                Loc::Tree(_) => self.moved_members[p.mobility as usize] = true,
+                Loc::Pending(_) => self.moved_pending[p.mobility as usize] = true,
+                Loc::Out => {}
+            }
             if !p.moved {
                 p.moved = true;
                 self.moved.push(id);
@@ -1496,12 +1507,6 @@ impl CanopyBroadPhase {
             self.scratch.seen = seen;
             return (gone, found);
         }
-        let marks = self.member_marks(moved);
-        self.walk_members(&marks, &mut found);
-        self.pending_pairs(&marks, &mut found);
-        // The walks met every candidate of a moved proxy that goes on (fat boxes overlapping,
-        // filter passing): those are marked met on the moved side, and the moved proxies'
-        // other candidates ended. Only the pairs that are not candidates yet stay in `found`.
         // Which proxies moved, as a bitmap (a few KB, cached) rather than their records.
         let mut moved_bits = std::mem::take(&mut self.scratch.moved_bits);
         moved_bits.clear();
@@ -1509,43 +1514,60 @@ impl CanopyBroadPhase {
         for &id in moved {
             moved_bits[id as usize / 64] |= 1 << (id % 64);
         }
+        // Every moved member's tree was noted (by `mark_moved`, or by step 3's rebuilds).
+        debug_assert!(moved.iter().all(|&id| {
+            let p = self.proxies[id as usize].as_ref();
+            p.is_none_or(|p| {
+                !matches!(p.loc, Loc::Tree(_)) || self.moved_members[p.mobility as usize]
+            })
+        }));
+        let marks = self.member_marks(&moved_bits);
+        self.walk_members(&marks, &mut found);
+        self.pending_pairs(&marks, &mut found);
+        // The walks met every candidate of a moved proxy that goes on (fat boxes overlapping,
+        // filter passing): those are marked met on the moved side, and the moved proxies'
+        // other candidates ended. Only the pairs that are not candidates yet stay in `found`.
         let is_moved = |id: u32| has_bit(&moved_bits, id);
-        let pairs = &mut self.pairs;
-        found.retain(|&(a, b)| !pairs.mark_met(a, b, is_moved(a), is_moved(b)));
+        // Both ends' partner lists asked for a few pairs ahead (`prefetch_pair_lists`): the
+        // walks' pairs come in tree order, their proxies' lists scattered.
+        let mut kept = 0;
+        for k in 0..found.len() {
+            self.prefetch_pair_lists(&found, k);
+            let (a, b) = found[k];
+            if !self.pairs.mark_met(a, b, is_moved(a), is_moved(b)) {
+                found[kept] = (a, b);
+                kept += 1;
+            }
+        }
+        found.truncate(kept);
         self.scratch.moved_bits = moved_bits;
-        // Every marked list is read here (`moved` holds each id once: `mark_moved`).
-        for &id in moved {
+        // Every marked list is read here (`moved` holds each id once: `mark_moved`), each asked
+        // for a few proxies ahead.
+        for (k, &id) in moved.iter().enumerate() {
+            if let Some(&ahead) = moved.get(k + PREFETCH_AHEAD) {
+                self.pairs.prefetch_list_head(ahead);
+            }
+            if let Some(&near) = moved.get(k + PREFETCH_AHEAD / 2) {
+                self.pairs.prefetch_list(near);
+            }
             self.pairs.take_unmet(id, &mut gone);
         }
         (gone, found)
     }
 
-    /// Marks of the moved BVH members, per tree (`None`: nothing moved there).
-    fn member_marks(&mut self, moved: &[u32]) -> [Option<PairMarks>; 3] {
-        let mut marked = [false; 3];
-        for &id in moved {
-            if let Some(p) = &self.proxies[id as usize] {
-                if let Loc::Tree(slot) = p.loc {
-                    let t = &mut self.trees[p.mobility as usize];
-                    t.scratch_marks[slot as usize] = true;
-                    marked[p.mobility as usize] = true;
-                }
-            }
-        }
-        let marks: [Option<PairMarks>; 3] = std::array::from_fn(|i| {
-            marked[i].then(|| {
+    /// Marks of the moved BVH members (`moved_bits`: the moved proxy ids), per tree (`None`:
+    /// none of its members moved). Read through the slots' proxy ids, not the moved proxies'
+    /// records, which are scattered.
+    fn member_marks(&self, moved_bits: &[u64]) -> [Option<PairMarks>; 3] {
+        std::array::from_fn(|i| {
+            self.moved_members[i].then(|| {
                 let t = &self.trees[i];
-                t.bvh.marks(|prim| t.scratch_marks[prim as usize])
+                t.bvh.marks(|slot| {
+                    let id = t.members[slot as usize];
+                    id != DEAD && has_bit(moved_bits, id)
+                })
             })
-        });
-        for &id in moved {
-            if let Some(p) = &self.proxies[id as usize] {
-                if let Loc::Tree(slot) = p.loc {
-                    self.trees[p.mobility as usize].scratch_marks[slot as usize] = false;
-                }
-            }
-        }
-        marks
+        })
     }
 
     /// One marked pair walk per pair of trees that may pair: every pair of BVH members with a
@@ -1709,12 +1731,17 @@ impl BroadPhase for CanopyBroadPhase {
             } else {
                 policy.moving_builder
             };
+            let rebuilds = self.trees[m as usize].rebuilds;
             self.trees[m as usize].maintain(
                 &mut self.proxies,
                 &policy,
                 builder,
                 self.config.parallel,
             );
+            if self.trees[m as usize].rebuilds != rebuilds {
+                // The pending proxies are members now.
+                self.moved_members[m as usize] |= self.moved_pending[m as usize];
+            }
         }
 
         lap!(self, clock, trees);
@@ -1783,6 +1810,8 @@ impl BroadPhase for CanopyBroadPhase {
                 p.box_only = false;
             }
         }
+        self.moved_members = [false; 3];
+        self.moved_pending = [false; 3];
         self.stats.moved = moved.len();
         self.stats.deleted = deleted;
         self.stats.added = added;

@@ -45,9 +45,6 @@ pub(crate) struct ProxyTree {
     /// (about 37 µs of a 4,000-proxy rebuild's 230 in `spawn_storm`, whose moving tree is
     /// rebuilt 16 times in 200 steps and never needs them).
     no_marks: std::sync::OnceLock<PairMarks>,
-    /// Per BVH primitive, scratch space for marking moved proxies (always all `false` between
-    /// updates).
-    pub scratch_marks: Vec<bool>,
     built_cost: f64,
     pub rebuilds: u64,
     pub refits: u64,
@@ -233,7 +230,6 @@ impl ProxyTree {
             }
         }
         self.no_marks = std::sync::OnceLock::new();
-        self.scratch_marks = vec![false; self.members.len()];
         self.dead = 0;
         self.built_cost = self.bvh.sah_cost(1.0, 1.0);
         self.rebuilds += 1;
