@@ -1240,8 +1240,9 @@ impl CanopyBroadPhase {
                 continue;
             }
             let Some(pending_bvh) = ta.pending_bvh() else {
-                // No pending tree (its build failed, which valid fat boxes never make it do):
-                // one query per pending proxy instead.
+                // No pending tree (a list short enough to scan, `SCANNED_PENDING`, or a build
+                // that failed, which valid fat boxes never make happen): one query per pending
+                // proxy instead.
                 for &id in &ta.pending {
                     let Some(p) = &self.proxies[id as usize] else {
                         continue;
@@ -1383,6 +1384,18 @@ impl CanopyBroadPhase {
         }
     }
 
+    /// `prefetch_pair_lists` for a list of proxy ids: the list heads of `ids[k + PREFETCH_AHEAD]`
+    /// and the lists of `ids[k + PREFETCH_AHEAD / 2]`.
+    #[inline]
+    fn prefetch_id_lists(&self, ids: &[u32], k: usize) {
+        if let Some(&ahead) = ids.get(k + PREFETCH_AHEAD) {
+            self.pairs.prefetch_list_head(ahead);
+        }
+        if let Some(&near) = ids.get(k + PREFETCH_AHEAD / 2) {
+            self.pairs.prefetch_list(near);
+        }
+    }
+
     /// `false` when no collider of tree `m` can pair with `p`.
     fn may_query(&self, p: &Proxy, m: Mobility) -> bool {
         if m == Mobility::Fixed && p.mobility == Mobility::Fixed && self.fixed_fixed == 0 {
@@ -1496,11 +1509,8 @@ impl CanopyBroadPhase {
                 // query and the check of known partners then do not wait for them.
                 if let Some(&ahead) = moved.get(k + PREFETCH_AHEAD) {
                     prefetch(self.proxies.as_ptr().wrapping_add(ahead as usize));
-                    self.pairs.prefetch_list_head(ahead);
                 }
-                if let Some(&near) = moved.get(k + PREFETCH_AHEAD / 2) {
-                    self.pairs.prefetch_list(near);
-                }
+                self.prefetch_id_lists(moved, k);
                 self.moved_pairs(id, &mut seen, &mut gone, &mut found);
             }
             seen.clear();
@@ -1544,12 +1554,7 @@ impl CanopyBroadPhase {
         // Every marked list is read here (`moved` holds each id once: `mark_moved`), each asked
         // for a few proxies ahead.
         for (k, &id) in moved.iter().enumerate() {
-            if let Some(&ahead) = moved.get(k + PREFETCH_AHEAD) {
-                self.pairs.prefetch_list_head(ahead);
-            }
-            if let Some(&near) = moved.get(k + PREFETCH_AHEAD / 2) {
-                self.pairs.prefetch_list(near);
-            }
+            self.prefetch_id_lists(moved, k);
             self.pairs.take_unmet(id, &mut gone);
         }
         (gone, found)
