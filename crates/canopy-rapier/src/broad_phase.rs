@@ -1552,20 +1552,28 @@ impl CanopyBroadPhase {
         found.truncate(kept);
         self.scratch.moved_bits = moved_bits;
         // Every marked list is read here (`moved` holds each id once: `mark_moved`), each asked
-        // for a few proxies ahead.
-        for (k, &id) in moved.iter().enumerate() {
-            self.prefetch_id_lists(moved, k);
-            self.pairs.take_unmet(id, &mut gone);
+        // for a few proxies ahead; with no candidate at all, there is none to read.
+        if self.pairs.candidate_len() > 0 {
+            for (k, &id) in moved.iter().enumerate() {
+                self.prefetch_id_lists(moved, k);
+                self.pairs.take_unmet(id, &mut gone);
+            }
         }
         (gone, found)
     }
 
     /// Marks of the moved BVH members (`moved_bits`: the moved proxy ids), per tree (`None`:
-    /// none of its members moved). Read through the slots' proxy ids, not the moved proxies'
-    /// records, which are scattered.
+    /// none of its members moved, or no tree may pair with it, so that no walk reads them).
+    /// Read through the slots' proxy ids, not the moved proxies' records, which are scattered.
     fn member_marks(&self, moved_bits: &[u64]) -> [Option<PairMarks>; 3] {
         std::array::from_fn(|i| {
-            self.moved_members[i].then(|| {
+            // `many_kinematics`: 27,000 kinematic colliders and no other tree; marking the
+            // 21,000 to 24,000 that leave their boxes together took 230 to 550 µs for nothing.
+            let m = Mobility::ALL[i];
+            let walked = Mobility::ALL
+                .iter()
+                .any(|&o| self.trees_may_pair(m, o) || self.trees_may_pair(o, m));
+            (self.moved_members[i] && walked).then(|| {
                 let t = &self.trees[i];
                 t.bvh.marks(|slot| {
                     let id = t.members[slot as usize];

@@ -639,6 +639,64 @@ fn body_type_changes_are_seen_in_large_updates() {
 }
 
 #[test]
+fn a_tree_moving_together_with_nothing_to_pair_with_keeps_the_contract() {
+    // A grid of kinematic balls moving as one, each overlapping its neighbours: every ball
+    // leaves its fat box in the same updates, which take the marked pair walks. With Rapier's
+    // default collision types no tree may pair with the kinematic one (kinematic-kinematic
+    // and kinematic-fixed pairs are filtered), so no walk runs and the walks' marks are not
+    // made. Then some balls accept kinematic-kinematic contacts (now the tree may pair with
+    // itself) and a dynamic ball falls among them: every pair must be found.
+    let mut rng = Rng(4242);
+    let mut sim = new_sim(&mut rng, 0);
+    let mut balls = Vec::new();
+    for i in 0..300 {
+        let at = vector![(i % 20) as f32 * 0.9, 2.0, (i / 20) as f32 * 0.9];
+        let rb = sim.bodies.insert(
+            RigidBodyBuilder::kinematic_velocity_based()
+                .translation(at)
+                .linvel(vector![1.5, 0.0, 0.5]),
+        );
+        balls.push(sim.colliders.insert_with_parent(
+            ColliderBuilder::ball(0.5),
+            rb,
+            &mut sim.bodies,
+        ));
+    }
+    let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
+    let mut most_moved = 0;
+    let mut run = |sim: &mut Sim, bp: &mut Checked, steps: usize| {
+        for _ in 0..steps {
+            step(sim, bp);
+            most_moved = most_moved.max(bp.inner.stats().moved);
+        }
+    };
+    run(&mut sim, &mut bp, 40);
+    assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+    assert_eq!(bp.inner.stats().pairs, 0);
+    for &c in balls.iter().step_by(7) {
+        sim.colliders[c].set_active_collision_types(
+            ActiveCollisionTypes::default() | ActiveCollisionTypes::KINEMATIC_KINEMATIC,
+        );
+    }
+    run(&mut sim, &mut bp, 40);
+    assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+    assert!(bp.inner.stats().pairs > 0, "{:?}", bp.inner.stats());
+    let drop = sim.bodies.insert(
+        RigidBodyBuilder::dynamic()
+            .translation(vector![12.0, 3.0, 6.0])
+            .linvel(vector![1.5, 0.0, 0.5]),
+    );
+    sim.colliders
+        .insert_with_parent(ColliderBuilder::ball(0.6), drop, &mut sim.bodies);
+    run(&mut sim, &mut bp, 40);
+    assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+    assert!(bp.checked_pairs > 0);
+    // The grid did leave its boxes together (one proxy in eight or more of the 301 before the
+    // dynamic ball): those updates took the walks.
+    assert!(most_moved >= 100, "at most {most_moved} moved at once");
+}
+
+#[test]
 fn rebuild_heavy_policy_keeps_the_contract() {
     // Tiny pending and dead limits force rebuilds nearly every step.
     let mut config = CanopyBroadPhaseConfig::default();
