@@ -1,7 +1,8 @@
 //! Profiling aid: records a standard scene's broadphase inputs (stepped with Rapier's own
 //! broadphase), then replays them into a fresh broadphase and prints the time per update.
 //! Run it under `valgrind --tool=callgrind --toggle-collect='*harness*replay*'` for stable
-//! instruction counts of the replay alone.
+//! instruction counts of the replay alone; `REPLAYS=N` replays N times (the first N - 1
+//! on a fresh broadphase each and fresh copies of the sets, as the criterion bench does), for `perf record`'s samples.
 //!
 //! `cargo run --release --example broadphase_replay -- SCENE rapier|canopy|ab|split [STEPS] [small|full]`
 //! (canopy's margin and velocity stretch can be overridden with `CANOPY_MARGIN` and
@@ -26,7 +27,7 @@
 //! updates where the first layers fall together cost canopy more than Rapier).
 
 use canopy::rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig};
-use canopy::scenes::harness::{record, replay, AabbFloor, RecordedUpdate};
+use canopy::scenes::harness::{record, replay, replay_timed, AabbFloor, RecordedUpdate};
 use canopy::scenes::{scene, Size};
 use rapier3d::geometry::{BroadPhase, BroadPhaseBvh};
 use std::time::Instant;
@@ -110,7 +111,20 @@ fn main() {
         .num_threads(1)
         .build()
         .expect("pool");
+    // `REPLAYS=N` replays N times (a fresh broadphase each time), for a profiler's samples.
+    let replays: usize = std::env::var("REPLAYS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1);
     pool.install(|| {
+        for _ in 1..replays {
+            let mut fresh: Box<dyn BroadPhase> = match which {
+                "rapier" => Box::new(BroadPhaseBvh::new()),
+                _ => Box::new(CanopyBroadPhase::with_config(config).expect("validated above")),
+            };
+            first.apply(fresh.as_mut(), &mut Vec::new());
+            replay_timed(fresh.as_mut(), rest);
+        }
         first.apply(bp.as_mut(), &mut Vec::new());
         let t = Instant::now();
         let events = replay(bp.as_mut(), rest);
