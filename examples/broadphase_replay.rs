@@ -1,8 +1,9 @@
 //! Profiling aid: records a standard scene's broadphase inputs (stepped with Rapier's own
 //! broadphase), then replays them into a fresh broadphase and prints the time per update.
 //! Run it under `valgrind --tool=callgrind --toggle-collect='*harness*replay*'` for stable
-//! instruction counts of the replay alone; `REPLAYS=N` replays N times (the first N - 1
-//! on a fresh broadphase each and fresh copies of the sets, as the criterion bench does), for `perf record`'s samples.
+//! instruction counts of the replay alone. In the `rapier` and `canopy` modes, `REPLAYS=N`
+//! replays N times, for `perf record`'s samples: the first N - 1 each on a fresh broadphase and
+//! fresh copies of the sets (as the criterion bench does), the last one timed as without it.
 //!
 //! `cargo run --release --example broadphase_replay -- SCENE rapier|canopy|ab|split [STEPS] [small|full]`
 //! (canopy's margin and velocity stretch can be overridden with `CANOPY_MARGIN` and
@@ -111,7 +112,7 @@ fn main() {
         .num_threads(1)
         .build()
         .expect("pool");
-    // `REPLAYS=N` replays N times (a fresh broadphase each time), for a profiler's samples.
+    // `REPLAYS=N`: N - 1 untimed replays first, for a profiler's samples (module comment).
     let replays: usize = std::env::var("REPLAYS")
         .ok()
         .and_then(|v| v.parse().ok())
