@@ -25,7 +25,9 @@
 //! changes, or the positions after the integration), and by tenth of the recording (how the
 //! ratio evolves through the scene). It shows where canopy's time goes against
 //! Rapier's, which the totals of `ab` and of the criterion bench hide (`spawn_storm`: the
-//! updates where the first layers fall together cost canopy more than Rapier).
+//! updates where the first layers fall together cost canopy more than Rapier). Built with
+//! `--features phase-times`, `split` also prints canopy's phase timers by kind of update (the
+//! mean over the five runs, µs per update).
 
 use canopy::rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig};
 use canopy::scenes::harness::{record, replay, replay_timed, AabbFloor, RecordedUpdate};
@@ -180,8 +182,9 @@ fn split(
         .num_threads(1)
         .build()
         .expect("pool");
-    // Per repetition and update: Rapier's seconds, canopy's seconds, canopy's kind of update.
-    let runs: Vec<Vec<(f64, f64, usize)>> = pool.install(|| {
+    // Per repetition and update: Rapier's seconds, canopy's seconds, canopy's kind of update,
+    // and canopy's phases (with the `phase-times` feature).
+    let runs: Vec<Vec<(f64, f64, usize, Phases)>> = pool.install(|| {
         (0..REPS)
             .map(|_| {
                 let mut rapier = BroadPhaseBvh::new();
@@ -189,6 +192,9 @@ fn split(
                 let mut events = Vec::new();
                 first.apply(&mut rapier, &mut events);
                 first.apply(&mut canopy, &mut events);
+                // The first update's phases are not one of the timed updates'.
+                #[cfg(feature = "phase-times")]
+                canopy.take_phase_times();
                 rest.iter()
                     .enumerate()
                     .map(|(i, u)| {
@@ -215,7 +221,11 @@ fn split(
                         } else {
                             1
                         };
-                        (r, c, kind)
+                        #[cfg(feature = "phase-times")]
+                        let phases = canopy.take_phase_times();
+                        #[cfg(not(feature = "phase-times"))]
+                        let phases = ();
+                        (r, c, kind, phases)
                     })
                     .collect()
             })
@@ -230,7 +240,7 @@ fn split(
     // By tenth of the recording: how the ratio evolves through the scene.
     let mut by_tenth = [(0usize, 0.0f64, 0.0f64); 10];
     for i in 0..rest.len() {
-        let median = |k: fn(&(f64, f64, usize)) -> f64| {
+        let median = |k: fn(&(f64, f64, usize, Phases)) -> f64| {
             let mut v: Vec<f64> = runs.iter().map(|r| k(&r[i])).collect();
             v.sort_by(f64::total_cmp);
             v[REPS / 2]
@@ -276,4 +286,60 @@ fn split(
         canopy * 1e3,
         rapier / canopy
     );
+    #[cfg(feature = "phase-times")]
+    print_phases_by_kind(&KINDS, &runs);
+}
+
+/// Canopy's phases when timed (feature `phase-times`); nothing otherwise.
+#[cfg(feature = "phase-times")]
+type Phases = canopy::rapier::PhaseTimes;
+#[cfg(not(feature = "phase-times"))]
+type Phases = ();
+
+/// With the `phase-times` feature, `split` also prints canopy's phases by kind of update: the
+/// mean over the repetitions, in µs per update of that kind (the timers' own cost, a clock
+/// read per phase, is included).
+#[cfg(feature = "phase-times")]
+fn print_phases_by_kind(kinds: &[&str], runs: &[Vec<(f64, f64, usize, Phases)>]) {
+    use std::time::Duration;
+    println!(
+        "  canopy's phases by kind (µs per update, mean of {} runs):",
+        runs.len()
+    );
+    for (k, label) in kinds.iter().enumerate() {
+        let mut sum = [Duration::ZERO; 7];
+        let mut updates = 0usize;
+        for run in runs {
+            for (_, _, _, t) in run.iter().filter(|u| u.2 == k) {
+                updates += 1;
+                let phases = [
+                    t.removals,
+                    t.examine,
+                    t.trees,
+                    t.search,
+                    t.pair_edits,
+                    t.liveness,
+                    t.finish,
+                ];
+                for (s, p) in sum.iter_mut().zip(phases) {
+                    *s += p;
+                }
+            }
+        }
+        if updates == 0 {
+            continue;
+        }
+        let us = |d: Duration| d.as_secs_f64() * 1e6 / updates as f64;
+        println!(
+            "  {label:>12}: removals {:6.1}, examine {:6.1}, trees {:6.1}, search {:6.1}, \
+             pair edits {:6.1}, liveness {:6.1}, finish {:5.1}",
+            us(sum[0]),
+            us(sum[1]),
+            us(sum[2]),
+            us(sum[3]),
+            us(sum[4]),
+            us(sum[5]),
+            us(sum[6])
+        );
+    }
 }
