@@ -38,7 +38,8 @@ pub struct RebuildPolicy {
     /// Builder for the tree of fixed colliders, which rarely changes. Default: binned SAH.
     pub fixed_builder: Builder,
     /// Rebuild a refit tree once its SAH cost exceeds this multiple of its cost right after the
-    /// last build. Default: 1.5.
+    /// last build (compared every few refits, and after every refit that moved at least half
+    /// of the tree's members). Default: 1.5.
     pub max_cost_growth: f64,
     /// New colliders wait in a pending list with a small tree of its own (rebuilt when the list
     /// changes, refit when only boxes do); the main tree is rebuilt once that list exceeds

@@ -165,6 +165,8 @@ impl ProxyTree {
             self.rebuild(proxies, builder, parallel);
         } else if !self.changes.is_empty() {
             self.refits += 1;
+            // Most members moved: the cost is checked at once (see below).
+            let most_moved = self.changes.len() * 2 >= self.members.len();
             let refit = self.bvh.refit_primitives(&self.changes);
             self.changes.clear();
             if refit.is_err() {
@@ -173,9 +175,12 @@ impl ProxyTree {
                 self.rebuild(proxies, builder, parallel);
                 return;
             }
-            // The cost is one pass over the nodes: check it every few refits only.
+            // The cost is one pass over the nodes: check it every few refits only, or at once
+            // after a refit that moved most members, which costs more than that pass anyway
+            // and is where a tree goes bad at once (`teleport`: 60 to 120 times its cost
+            // after the build, for up to three updates until the next check).
             self.refits_since_check += 1;
-            if self.refits_since_check >= COST_CHECK_INTERVAL {
+            if self.refits_since_check >= COST_CHECK_INTERVAL || most_moved {
                 self.refits_since_check = 0;
                 if self.bvh.sah_cost(1.0, 1.0) > self.built_cost * policy.max_cost_growth {
                     self.rebuild(proxies, builder, parallel);

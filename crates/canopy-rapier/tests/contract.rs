@@ -697,6 +697,53 @@ fn a_tree_moving_together_with_nothing_to_pair_with_keeps_the_contract() {
 }
 
 #[test]
+fn a_tree_most_of_which_teleports_is_rebuilt_in_that_update() {
+    // 300 floating balls (no gravity on them); four steps in a row, two thirds of them jump to
+    // random places in a cube a kilometre wide. Each of those updates refits the dynamic tree
+    // with most of its members moved, which multiplies its SAH cost many times over. The cost
+    // is compared at once after such a refit, so the tree is rebuilt in that update rather
+    // than kept for up to three more (until the check that runs every few refits).
+    let mut rng = Rng(777);
+    let mut sim = new_sim(&mut rng, 0);
+    let mut balls = Vec::new();
+    for i in 0..300 {
+        let at = vector![(i % 20) as f32 * 2.0, 5.0, (i / 20) as f32 * 2.0];
+        let rb = sim.bodies.insert(
+            RigidBodyBuilder::dynamic()
+                .translation(at)
+                .gravity_scale(0.0),
+        );
+        sim.colliders
+            .insert_with_parent(ColliderBuilder::ball(0.5), rb, &mut sim.bodies);
+        balls.push(rb);
+    }
+    let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
+    for _ in 0..3 {
+        step(&mut sim, &mut bp);
+    }
+    for round in 0..4 {
+        let before = bp.inner.stats().rebuilds;
+        for (i, &rb) in balls.iter().enumerate() {
+            if i % 3 != round % 3 {
+                let to = vector![
+                    rng.f(-500.0, 500.0),
+                    rng.f(-500.0, 500.0),
+                    rng.f(-500.0, 500.0)
+                ];
+                sim.bodies[rb].set_translation(to, true);
+            }
+        }
+        step(&mut sim, &mut bp);
+        assert!(
+            bp.inner.stats().rebuilds > before,
+            "round {round}: the tree was not rebuilt ({:?})",
+            bp.inner.stats()
+        );
+    }
+    assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
+}
+
+#[test]
 fn rebuild_heavy_policy_keeps_the_contract() {
     // Tiny pending and dead limits force rebuilds nearly every step.
     let mut config = CanopyBroadPhaseConfig::default();
