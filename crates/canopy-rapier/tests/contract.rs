@@ -638,6 +638,26 @@ fn body_type_changes_are_seen_in_large_updates() {
     assert!(bp.inner.stats().pairs >= 6, "{:?}", bp.inner.stats());
 }
 
+/// 300 balls of radius 0.5 in a 20 x 15 grid at height `y`, `spacing` apart, each on a body
+/// from `body` placed at its cell; returns the bodies and colliders.
+fn ball_grid(
+    sim: &mut Sim,
+    spacing: f32,
+    y: f32,
+    body: impl Fn() -> RigidBodyBuilder,
+) -> Vec<(RigidBodyHandle, ColliderHandle)> {
+    (0..300)
+        .map(|i| {
+            let at = vector![(i % 20) as f32 * spacing, y, (i / 20) as f32 * spacing];
+            let rb = sim.bodies.insert(body().translation(at));
+            let c =
+                sim.colliders
+                    .insert_with_parent(ColliderBuilder::ball(0.5), rb, &mut sim.bodies);
+            (rb, c)
+        })
+        .collect()
+}
+
 #[test]
 fn a_tree_moving_together_with_nothing_to_pair_with_keeps_the_contract() {
     // A grid of kinematic balls moving as one, each overlapping its neighbours: every ball
@@ -648,20 +668,12 @@ fn a_tree_moving_together_with_nothing_to_pair_with_keeps_the_contract() {
     // itself) and a dynamic ball falls among them: every pair must be found.
     let mut rng = Rng(4242);
     let mut sim = new_sim(&mut rng, 0);
-    let mut balls = Vec::new();
-    for i in 0..300 {
-        let at = vector![(i % 20) as f32 * 0.9, 2.0, (i / 20) as f32 * 0.9];
-        let rb = sim.bodies.insert(
-            RigidBodyBuilder::kinematic_velocity_based()
-                .translation(at)
-                .linvel(vector![1.5, 0.0, 0.5]),
-        );
-        balls.push(sim.colliders.insert_with_parent(
-            ColliderBuilder::ball(0.5),
-            rb,
-            &mut sim.bodies,
-        ));
-    }
+    let balls: Vec<ColliderHandle> = ball_grid(&mut sim, 0.9, 2.0, || {
+        RigidBodyBuilder::kinematic_velocity_based().linvel(vector![1.5, 0.0, 0.5])
+    })
+    .into_iter()
+    .map(|(_, c)| c)
+    .collect();
     let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
     let mut most_moved = 0;
     let mut run = |sim: &mut Sim, bp: &mut Checked, steps: usize| {
@@ -705,18 +717,12 @@ fn a_tree_most_of_which_teleports_is_rebuilt_in_that_update() {
     // than kept for up to three more (until the check that runs every few refits).
     let mut rng = Rng(777);
     let mut sim = new_sim(&mut rng, 0);
-    let mut balls = Vec::new();
-    for i in 0..300 {
-        let at = vector![(i % 20) as f32 * 2.0, 5.0, (i / 20) as f32 * 2.0];
-        let rb = sim.bodies.insert(
-            RigidBodyBuilder::dynamic()
-                .translation(at)
-                .gravity_scale(0.0),
-        );
-        sim.colliders
-            .insert_with_parent(ColliderBuilder::ball(0.5), rb, &mut sim.bodies);
-        balls.push(rb);
-    }
+    let balls: Vec<RigidBodyHandle> = ball_grid(&mut sim, 2.0, 5.0, || {
+        RigidBodyBuilder::dynamic().gravity_scale(0.0)
+    })
+    .into_iter()
+    .map(|(b, _)| b)
+    .collect();
     let mut bp = Checked::new(CanopyBroadPhaseConfig::default());
     for _ in 0..3 {
         step(&mut sim, &mut bp);
