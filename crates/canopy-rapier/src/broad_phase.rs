@@ -1039,8 +1039,9 @@ impl CanopyBroadPhase {
         if fat.is_valid() {
             // Unless the full examination moved it already (filter, tree), only its box changed.
             p.box_only = !p.moved;
+            let jumped = !fat.to_aabb().intersects(&p.fat);
             fat.write(&mut p.fat);
-            self.trees[p.mobility as usize].set_box(p);
+            self.trees[p.mobility as usize].set_box(p, jumped);
             self.mark_moved(id);
         } else {
             let handle = p.handle;
@@ -1164,8 +1165,9 @@ impl CanopyBroadPhase {
             self.trees[mobility as usize].insert(id, &mut p);
             moved = true;
         } else if !p.fat.contains(&tight) {
+            let jumped = !p.fat.intersects(&fat);
             p.fat = fat;
-            self.trees[mobility as usize].set_box(&p);
+            self.trees[mobility as usize].set_box(&p, jumped);
             moved = true;
         }
         if moved {

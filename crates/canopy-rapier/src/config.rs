@@ -39,7 +39,8 @@ pub struct RebuildPolicy {
     pub fixed_builder: Builder,
     /// Rebuild a refit tree once its SAH cost exceeds this multiple of its cost right after the
     /// last build (compared every few refits, and after every refit that moved at least half
-    /// of the tree's members). Default: 1.5.
+    /// of the tree's members, some of them far: new fat boxes clear of their old ones).
+    /// Default: 1.5.
     pub max_cost_growth: f64,
     /// New colliders wait in a pending list with a small tree of its own (rebuilt when the list
     /// changes, refit when only boxes do); the main tree is rebuilt once that list exceeds

@@ -712,9 +712,10 @@ fn a_tree_moving_together_with_nothing_to_pair_with_keeps_the_contract() {
 fn a_tree_most_of_which_teleports_is_rebuilt_in_that_update() {
     // 300 floating balls (no gravity on them); four steps in a row, two thirds of them jump to
     // random places in a cube a kilometre wide. Each of those updates refits the dynamic tree
-    // with most of its members moved, which multiplies its SAH cost many times over. The cost
-    // is compared at once after such a refit, so the tree is rebuilt in that update rather
-    // than kept for up to three more (until the check that runs every few refits).
+    // with most of its members' boxes far from their old ones, which multiplies its SAH cost
+    // many times over. The cost is compared at once after such a refit, so the tree is rebuilt
+    // in that update rather than kept for up to three more (until the check that runs every
+    // few refits).
     let mut rng = Rng(777);
     let mut sim = new_sim(&mut rng, 0);
     let balls: Vec<RigidBodyHandle> = ball_grid(&mut sim, 2.0, 5.0, || {
