@@ -38,9 +38,9 @@ pub struct RebuildPolicy {
     /// Builder for the tree of fixed colliders, which rarely changes. Default: binned SAH.
     pub fixed_builder: Builder,
     /// Rebuild a refit tree once its SAH cost exceeds this multiple of its cost right after the
-    /// last build (compared every few refits, and after every refit that moved at least half
-    /// of the tree's members, some of them far: new fat boxes clear of their old ones).
-    /// Default: 1.5.
+    /// last build (compared every few refits, and at once after a refit that moved at least
+    /// half of the tree's leaves when some member jumped since the last comparison: a new fat
+    /// box clear of the one it replaced). Default: 1.5.
     pub max_cost_growth: f64,
     /// New colliders wait in a pending list with a small tree of its own (rebuilt when the list
     /// changes, refit when only boxes do); the main tree is rebuilt once that list exceeds

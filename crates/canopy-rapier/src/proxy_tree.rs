@@ -187,7 +187,7 @@ impl ProxyTree {
             // check (a new box clear of its old one): a few jumps stretch their leaves'
             // ancestors across the jump, and the pair walks that follow a refit of most
             // members visit the whole tree (`teleport`: 32 bodies jump each step, and its
-            // dense refits find the tree at 60 to 120 times its cost after the build, which
+            // dense refits find the tree at 61 to 71 times its cost after the build, which
             // it kept for up to three more updates). Members that only moved on, even all of
             // them (`balls` falling in lockstep: 1.03 to 1.33 times), leave the tree about as
             // good as it was and wait for the next check.
