@@ -51,44 +51,19 @@ fn main() {
     };
     let updates = record(s, steps);
     let (first, rest) = updates.split_first().expect("one update at least");
-    let mut bp: Box<dyn BroadPhase> = match which {
-        "rapier" => Box::new(BroadPhaseBvh::new()),
-        _ => {
-            // Optional overrides for tuning: CANOPY_MARGIN, CANOPY_VELOCITY_STEPS.
-            let mut config = canopy::rapier::CanopyBroadPhaseConfig::default();
-            let var = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f32>().ok());
-            if let Some(m) = var("CANOPY_MARGIN") {
-                config.margin = m;
-            }
-            if let Some(v) = var("CANOPY_VELOCITY_STEPS") {
-                config.velocity_steps = v;
-            }
-            if let Some(v) = var("CANOPY_PENDING_FRACTION") {
-                config.rebuild.pending_fraction = v as f64;
-            }
-            if std::env::var_os("CANOPY_MOVING_SAH").is_some() {
-                config.rebuild.moving_builder = canopy::core::Builder::BinnedSah;
-            }
-            if let Some(v) = var("CANOPY_COST_GROWTH") {
-                config.rebuild.max_cost_growth = v as f64;
-            }
-            if let Some(v) = var("CANOPY_DEAD_FRACTION") {
-                config.rebuild.max_dead_fraction = v as f64;
-            }
-            if let Some(v) = var("CANOPY_LIVE_PAIR_SKIN") {
-                config.live_pair_skin = v;
-            }
-            Box::new(CanopyBroadPhase::with_config(config).unwrap_or_else(|e| {
+    // The configuration with the overrides, for canopy and for `split` and `ab`; the
+    // broadphase `which` names, made anew for each replay.
+    let config = config_from_env();
+    let make = || -> Box<dyn BroadPhase> {
+        match which {
+            "rapier" => Box::new(BroadPhaseBvh::new()),
+            _ => Box::new(CanopyBroadPhase::with_config(config).unwrap_or_else(|e| {
                 eprintln!("{e}");
                 std::process::exit(2)
-            }))
+            })),
         }
     };
-    // The configuration with the overrides, for `split` and `ab`.
-    let config = bp
-        .as_any()
-        .downcast_ref::<CanopyBroadPhase>()
-        .map_or_else(CanopyBroadPhaseConfig::default, |c| *c.config());
+    let mut bp = make();
     if which == "split" {
         split(name, config, first, rest);
         return;
@@ -121,10 +96,7 @@ fn main() {
         .unwrap_or(1);
     pool.install(|| {
         for _ in 1..replays {
-            let mut fresh: Box<dyn BroadPhase> = match which {
-                "rapier" => Box::new(BroadPhaseBvh::new()),
-                _ => Box::new(CanopyBroadPhase::with_config(config).expect("validated above")),
-            };
+            let mut fresh = make();
             first.apply(fresh.as_mut(), &mut Vec::new());
             replay_timed(fresh.as_mut(), rest);
         }
@@ -141,6 +113,34 @@ fn main() {
             println!("{:?}", c.stats());
         }
     });
+}
+
+/// Canopy's configuration with the tuning overrides of the environment (module comment).
+fn config_from_env() -> CanopyBroadPhaseConfig {
+    let mut config = CanopyBroadPhaseConfig::default();
+    let var = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f32>().ok());
+    if let Some(m) = var("CANOPY_MARGIN") {
+        config.margin = m;
+    }
+    if let Some(v) = var("CANOPY_VELOCITY_STEPS") {
+        config.velocity_steps = v;
+    }
+    if let Some(v) = var("CANOPY_PENDING_FRACTION") {
+        config.rebuild.pending_fraction = v as f64;
+    }
+    if std::env::var_os("CANOPY_MOVING_SAH").is_some() {
+        config.rebuild.moving_builder = canopy::core::Builder::BinnedSah;
+    }
+    if let Some(v) = var("CANOPY_COST_GROWTH") {
+        config.rebuild.max_cost_growth = v as f64;
+    }
+    if let Some(v) = var("CANOPY_DEAD_FRACTION") {
+        config.rebuild.max_dead_fraction = v as f64;
+    }
+    if let Some(v) = var("CANOPY_LIVE_PAIR_SKIN") {
+        config.live_pair_skin = v;
+    }
+    config
 }
 
 /// Seconds each broadphase spent in its `update` calls over `rest` (after `first`, untimed),
