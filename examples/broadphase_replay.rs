@@ -301,45 +301,25 @@ type Phases = ();
 /// read per phase, is included).
 #[cfg(feature = "phase-times")]
 fn print_phases_by_kind(kinds: &[&str], runs: &[Vec<(f64, f64, usize, Phases)>]) {
-    use std::time::Duration;
     println!(
         "  canopy's phases by kind (µs per update, mean of {} runs):",
         runs.len()
     );
     for (k, label) in kinds.iter().enumerate() {
-        let mut sum = [Duration::ZERO; 7];
+        let mut sum = Phases::default();
         let mut updates = 0usize;
-        for run in runs {
-            for (_, _, _, t) in run.iter().filter(|u| u.2 == k) {
-                updates += 1;
-                let phases = [
-                    t.removals,
-                    t.examine,
-                    t.trees,
-                    t.search,
-                    t.pair_edits,
-                    t.liveness,
-                    t.finish,
-                ];
-                for (s, p) in sum.iter_mut().zip(phases) {
-                    *s += p;
-                }
-            }
+        for (_, _, _, t) in runs.iter().flatten().filter(|u| u.2 == k) {
+            updates += 1;
+            sum += *t;
         }
         if updates == 0 {
             continue;
         }
-        let us = |d: Duration| d.as_secs_f64() * 1e6 / updates as f64;
-        println!(
-            "  {label:>12}: removals {:6.1}, examine {:6.1}, trees {:6.1}, search {:6.1}, \
-             pair edits {:6.1}, liveness {:6.1}, finish {:5.1}",
-            us(sum[0]),
-            us(sum[1]),
-            us(sum[2]),
-            us(sum[3]),
-            us(sum[4]),
-            us(sum[5]),
-            us(sum[6])
-        );
+        let phases: Vec<String> = sum
+            .named()
+            .iter()
+            .map(|&(name, d)| format!("{name} {:6.1}", d.as_secs_f64() * 1e6 / updates as f64))
+            .collect();
+        println!("  {label:>12}: {}", phases.join(", "));
     }
 }

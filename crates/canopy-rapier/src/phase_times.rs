@@ -34,15 +34,38 @@ pub struct PhaseTimes {
 }
 
 impl PhaseTimes {
+    /// Every phase with its name, in the update's order: `removals`, `examine`, `trees`,
+    /// `search`, `pair edits`, `liveness`, `finish`.
+    pub fn named(&self) -> [(&'static str, Duration); 7] {
+        [
+            ("removals", self.removals),
+            ("examine", self.examine),
+            ("trees", self.trees),
+            ("search", self.search),
+            ("pair edits", self.pair_edits),
+            ("liveness", self.liveness),
+            ("finish", self.finish),
+        ]
+    }
+
     /// The sum of all phases.
     pub fn total(&self) -> Duration {
-        self.removals
-            + self.examine
-            + self.trees
-            + self.search
-            + self.pair_edits
-            + self.liveness
-            + self.finish
+        self.named().iter().map(|&(_, d)| d).sum()
+    }
+}
+
+impl std::ops::AddAssign for PhaseTimes {
+    /// Adds every field of `other`, the counts and the phases.
+    fn add_assign(&mut self, other: Self) {
+        self.updates += other.updates;
+        self.moved += other.moved;
+        self.removals += other.removals;
+        self.examine += other.examine;
+        self.trees += other.trees;
+        self.search += other.search;
+        self.pair_edits += other.pair_edits;
+        self.liveness += other.liveness;
+        self.finish += other.finish;
     }
 }
 
@@ -82,5 +105,9 @@ mod tests {
         assert!(t.examine >= Duration::from_millis(2));
         assert!(t.search >= Duration::from_millis(1));
         assert!(t.total() <= start.elapsed());
+        assert_eq!(t.named()[1], ("examine", t.examine));
+        let mut twice = t;
+        twice += t;
+        assert_eq!(twice.total(), t.total() * 2);
     }
 }
