@@ -226,7 +226,7 @@ struct Scratch {
     /// proxy's candidates its queries met.
     gone: Vec<IdPair>,
     found: Vec<IdPair>,
-    seen: Vec<bool>,
+    seen: KnownMarks,
     /// Live pairs whose exact boxes parted (`end_parted_live_pairs`), and step 6's waiting
     /// candidates that become live: each as a proxy id and the index of the pair's edge in
     /// its partner list.
@@ -234,6 +234,53 @@ struct Scratch {
     flips: Vec<(u32, u32)>,
     /// Steps 4 and 5 when many moved: a bitmap of the moved proxy ids.
     moved_bits: Vec<u64>,
+}
+
+/// Per proxy id, two bits for the query of one moved proxy (`moved_pairs`): the id is one of
+/// its candidates' partners, and the query met it. All clear between queries: `take` clears
+/// both bits of each partner that `mark` set.
+#[derive(Clone, Debug, Default)]
+struct KnownMarks {
+    known: Vec<u64>,
+    met: Vec<u64>,
+}
+
+impl KnownMarks {
+    /// Room for ids below `n`.
+    fn fit(&mut self, n: usize) {
+        let words = n.div_ceil(64);
+        if self.known.len() < words {
+            self.known.resize(words, 0);
+            self.met.resize(words, 0);
+        }
+    }
+
+    /// Marks every partner id in `known` (ids within `fit`).
+    #[inline]
+    fn mark(&mut self, known: impl IntoIterator<Item = u32>) {
+        for id in known {
+            self.known[id as usize / 64] |= 1 << (id % 64);
+        }
+    }
+
+    /// `true` when `id` is a marked partner (then noted as met).
+    #[inline]
+    fn meet(&mut self, id: u32) -> bool {
+        let (w, bit) = (id as usize / 64, 1u64 << (id % 64));
+        let known = self.known[w] & bit != 0;
+        self.met[w] |= bit & (known as u64).wrapping_neg();
+        known
+    }
+
+    /// Whether marked partner `id` was met; clears both its bits.
+    #[inline]
+    fn take(&mut self, id: u32) -> bool {
+        let (w, bit) = (id as usize / 64, 1u64 << (id % 64));
+        let met = self.met[w] & bit != 0;
+        self.known[w] &= !bit;
+        self.met[w] &= !bit;
+        met
+    }
 }
 
 /// The inputs of step 2 (`examine_all`).
@@ -1322,7 +1369,7 @@ impl CanopyBroadPhase {
     fn moved_pairs(
         &self,
         id: u32,
-        seen: &mut Vec<bool>,
+        seen: &mut KnownMarks,
         gone: &mut Vec<(u32, u32)>,
         out: &mut Vec<(u32, u32)>,
     ) {
@@ -1330,12 +1377,12 @@ impl CanopyBroadPhase {
             // Out of the trees: its candidates were dropped when its box became invalid.
             return;
         };
-        // Its current candidates are met again: they are recognised here, from its own short
-        // partner list, and marked as seen; every other pair it reports is new
-        // (`PairSet::insert_new`).
+        // Its current candidates are met again: its partners are marked (`KnownMarks`) and
+        // each hit is recognised by one bit test, not a scan of the list, whose varying
+        // length mispredicted (`spawn_storm` 1.021 old / new in `tools/ab`); every other pair
+        // it reports is new (`PairSet::insert_new`).
         let known = self.pairs.partners(id);
-        seen.clear();
-        seen.resize(known.len(), false);
+        seen.mark(known.iter().map(|e| e.other));
         for m in Mobility::ALL {
             let tree = &self.trees[m as usize];
             if tree.len() == 0 || !self.may_query(p, m) {
@@ -1345,8 +1392,7 @@ impl CanopyBroadPhase {
                 if other == id {
                     return;
                 }
-                if let Some(k) = known.iter().position(|e| e.other == other) {
-                    seen[k] = true;
+                if seen.meet(other) {
                     return;
                 }
                 let Some(o) = &self.proxies[other as usize] else {
@@ -1360,7 +1406,8 @@ impl CanopyBroadPhase {
                 }
             });
         }
-        for (e, &met) in known.iter().zip(seen.iter()) {
+        for e in known {
+            let met = seen.take(e.other);
             let ended = !met
                 || (!p.box_only
                     && self.proxies[e.other as usize]
@@ -1506,6 +1553,7 @@ impl CanopyBroadPhase {
         if moved.len() * SPARSE_MOVES < members {
             // Few moved: one query each beats any pass over whole trees.
             let mut seen = std::mem::take(&mut self.scratch.seen);
+            seen.fit(self.proxies.len());
             for (k, &id) in moved.iter().enumerate() {
                 // Records and partner lists a few moved proxies ahead (`PREFETCH_AHEAD`): the
                 // query and the check of known partners then do not wait for them.
@@ -1515,7 +1563,6 @@ impl CanopyBroadPhase {
                 self.prefetch_id_lists(moved, k);
                 self.moved_pairs(id, &mut seen, &mut gone, &mut found);
             }
-            seen.clear();
             self.scratch.seen = seen;
             return (gone, found);
         }
@@ -1855,6 +1902,28 @@ mod tests {
                 .filter(|&i| words[i as usize / 64] & (1 << (i % 64)) != 0)
                 .collect();
             prop_assert_eq!(SetBits::new(&words).collect::<Vec<_>>(), naive);
+        }
+
+        /// `KnownMarks`: after marking a set of partners and meeting any ids (marked or not,
+        /// repeated or not), `take` says met for exactly the marked ids that were met, and
+        /// leaves every bit clear for the next query.
+        #[test]
+        fn known_marks_meet_exactly_the_marked_ids(
+            known in prop::collection::btree_set(0u32..300, 0..20),
+            hits in prop::collection::vec(0u32..300, 0..40),
+        ) {
+            let mut marks = KnownMarks::default();
+            marks.fit(300);
+            for _ in 0..2 {
+                marks.mark(known.iter().copied());
+                for &h in &hits {
+                    prop_assert_eq!(marks.meet(h), known.contains(&h));
+                }
+                for &k in &known {
+                    prop_assert_eq!(marks.take(k), hits.contains(&k));
+                }
+                prop_assert!(marks.known.iter().chain(&marks.met).all(|&w| w == 0));
+            }
         }
 
         /// `mark_modified` sets exactly the listed indices, each with its first listed
