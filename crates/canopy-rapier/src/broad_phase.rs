@@ -236,8 +236,8 @@ struct Scratch {
     moved_bits: Vec<u64>,
 }
 
-/// Per proxy id, two bits for the query of one moved proxy (`moved_pairs`): the id is one of
-/// its candidates' partners, and the query met it. All clear between queries: `take` clears
+/// Per proxy id, two bits for the query of one moved proxy (`moved_pairs`): the id is a
+/// candidate partner of that proxy, and the query met it. All clear between queries: `take` clears
 /// both bits of each partner that `mark` set.
 #[derive(Clone, Debug, Default)]
 struct KnownMarks {
