@@ -16,6 +16,11 @@ use rapier3d::prelude::*;
 use std::collections::BTreeSet;
 
 const TOL: f32 = 1.0e-5;
+/// How much farther apart than the target distance two shapes must be (by parry's distance
+/// query) at a shape cast's hit for the hit to count as a graze within parry's cast
+/// tolerance. Of about 70,000 hits in 4,400 cases of `queries_match_rapier`, 0.25% were
+/// that far off (most by up to 0.007) and 99% were within 3e-4.
+const GRAZE: f32 = 1.0e-3;
 
 /// SplitMix64: small, seeded, reproducible.
 struct Rng(u64);
@@ -450,12 +455,35 @@ fn check_queries(world: &mut World, rng: &mut Rng) -> Result<(), TestCaseError> 
             };
             let r = rapier.cast_shape(&pos, &vel, &*shape, options);
             let c = canopy.cast_shape(&pos, &vel, &*shape, options);
-            same_closest(
-                "cast_shape",
-                c.map(|(h, hit)| (h, hit.time_of_impact)),
-                r.map(|(h, hit)| (h, hit.time_of_impact)),
-                options.max_time_of_impact,
-            )?;
+            let c = c.map(|(h, hit)| (h, hit.time_of_impact));
+            let r = r.map(|(h, hit)| (h, hit.time_of_impact));
+            // Where the two differ, the earlier hit may be a graze: parry's cast reports it,
+            // but parry's distance query puts the shapes farther apart than the target
+            // distance at its time. One side may cut it off (canopy casts against a
+            // non-convex shape only while the boxes meet; the two cull with different
+            // boxes), and no shape ever came within the distance, so missing it is right.
+            let earlier = match (c, r) {
+                (Some(a), Some(b)) if (a.1 - b.1).abs() > TOL * b.1.abs().max(1.0) => {
+                    Some(if a.1 < b.1 { a } else { b })
+                }
+                (Some(a), None) | (None, Some(a)) => Some(a),
+                _ => None,
+            };
+            let graze = earlier.is_some_and(|(h, t)| {
+                let moved =
+                    Isometry::from_parts((pos.translation.vector + vel * t).into(), pos.rotation);
+                let collider = &world.colliders[h];
+                rapier3d::parry::query::distance(
+                    &moved,
+                    &*shape,
+                    collider.position(),
+                    collider.shape(),
+                )
+                .is_ok_and(|d| d > options.target_distance + GRAZE)
+            });
+            if !graze {
+                same_closest("cast_shape", c, r, options.max_time_of_impact)?;
+            }
 
             // Conservative box query against brute force over current boxes.
             let query = shape.compute_aabb(&pos).loosened(rng.f(0.0, 1.0));
@@ -1050,4 +1078,47 @@ fn large_target_distances_reach_parry_unchanged() {
             );
         }
     }
+}
+
+/// The case CI's run of `queries_match_rapier` found (seed 383874577994423939, 44 colliders):
+/// a ball cast past a cone. Parry's cast reports a hit at time 1.0427 with the shapes 0.0558
+/// apart against a target distance of 0.05, just after the ball's box has left the cone's box
+/// grown by that distance. Between two convex shapes canopy casts with the caller's limit, as
+/// Rapier does, so the answer is parry's, graze and all.
+#[test]
+fn a_grazing_cast_between_convex_shapes_is_parrys() {
+    let quat = |i, j, k, w| {
+        rapier3d::na::UnitQuaternion::new_normalize(rapier3d::na::Quaternion::new(w, i, j, k))
+    };
+    let bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let cone_pose = Isometry::from_parts(
+        Translation::new(-1.3520141, 1.9380875, -3.2105424),
+        quat(-0.5847059, -0.6031537, -0.49794528, -0.21534874),
+    );
+    let cone = colliders.insert(ColliderBuilder::cone(0.61392504, 0.13841844).position(cone_pose));
+    let over = QueriesOver::new(&colliders, &bodies);
+    let q = over.queries(&bodies, &colliders);
+    let ball = Ball::new(0.3);
+    let start = Isometry::from_parts(
+        Translation::new(-1.3214984, -3.8775327, 0.060943604),
+        quat(-0.7560797, -0.44790784, -0.084905654, 0.46958834),
+    );
+    let vel = vector![0.5981529, 5.437555, -2.662702];
+    let options = ShapeCastOptions {
+        max_time_of_impact: 1.4708616,
+        target_distance: 0.05,
+        stop_at_penetration: true,
+        compute_impact_geometry_on_penetration: true,
+    };
+    let truth = parry_cast_time(&colliders[cone], &start, &vel, &ball, options);
+    assert!(
+        truth.is_some_and(|t| (t - 1.0427).abs() < 1.0e-3),
+        "parry: {truth:?}"
+    );
+    let got = q.cast_shape(&start, &vel, &ball, options);
+    assert!(
+        got.is_some_and(|(h, hit)| h == cone && (hit.time_of_impact - truth.unwrap()).abs() <= TOL),
+        "canopy {got:?} against parry {truth:?}"
+    );
 }

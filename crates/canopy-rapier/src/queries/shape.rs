@@ -39,9 +39,11 @@ impl<'a> SceneQueries<'a> {
     /// space). Colliders whose boxes the swept box meets are tested in the order the moving box
     /// reaches them, stopping once the next one is reached after the best hit.
     ///
-    /// Each collider is cast against only until the moving box has left the collider's box:
+    /// Where one of the two shapes is not convex (a mesh, heightfield, compound or voxels),
+    /// the collider is cast against only until the moving box has left the collider's box:
     /// no hit can come later, and parry's cast against a heightfield otherwise walks its
-    /// cells until the time limit, forever when there is none (`Real::MAX`). A negative
+    /// cells until the time limit, forever when there is none (`Real::MAX`). Two convex
+    /// shapes are cast with the caller's limit, exactly as Rapier casts them. A negative
     /// target distance counts as 0, as parry's casts between convex shapes take it (its
     /// heightfield cast panics on one), and against a heightfield one past the two boxes'
     /// farthest points is cut to that distance (a hit at time 0 either way); a NaN one, a NaN
@@ -132,13 +134,19 @@ impl<'a> SceneQueries<'a> {
             } else {
                 options.target_distance
             };
-            // Past the exit (with room for rounding) the boxes are apart: no hit.
-            let room = exit_room(&grown(&b, target_distance), &center);
-            let exit = ray
-                .clip_aabb(&room, max_toi)
-                .map_or(max_toi, |(_, exit)| exit);
+            // Past the exit (with room for rounding) the boxes are apart: no hit. Two convex
+            // shapes get the caller's limit, as in Rapier: parry's cast between them ends
+            // on its own, and a grazing hit its tolerance finds just past the exit (shapes a
+            // few thousandths farther apart than the target distance) is then Rapier's too.
+            let limit = if collider.shape().is_convex() && shape.is_convex() {
+                max_toi
+            } else {
+                let room = exit_room(&grown(&b, target_distance), &center);
+                ray.clip_aabb(&room, max_toi)
+                    .map_or(max_toi, |(_, exit)| max_toi.min(exit))
+            };
             let options = ShapeCastOptions {
-                max_time_of_impact: max_toi.min(exit),
+                max_time_of_impact: limit,
                 target_distance,
                 ..options
             };
