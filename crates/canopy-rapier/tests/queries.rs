@@ -1122,3 +1122,83 @@ fn a_grazing_cast_between_convex_shapes_is_parrys() {
         "canopy {got:?} against parry {truth:?}"
     );
 }
+
+/// Shape casts from anywhere in `f32`'s range with target distances up to infinity: every
+/// cast returns (parry's cast panicked on a shape at `f32::MAX` with a target distance of
+/// `f32::MAX`); near the colliders, canopy answers what parry's casts answer (an infinite
+/// distance hits at time 0, as parry's cast with a distance past the farthest points does);
+/// a collider whose box is so far away that even that distance overflows is left out.
+#[test]
+fn huge_positions_and_target_distances_do_not_panic() {
+    let bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let shapes = [
+        SharedShape::ball(0.5),
+        SharedShape::cuboid(0.5, 0.3, 0.2),
+        SharedShape::cone(0.5, 0.3),
+        SharedShape::cylinder(0.4, 0.3),
+    ];
+    for (i, s) in shapes.iter().enumerate() {
+        colliders.insert(ColliderBuilder::new(s.clone()).translation(vector![
+            i as f32 * 2.0,
+            0.0,
+            0.0
+        ]));
+    }
+    let over = QueriesOver::new(&colliders, &bodies);
+    let q = over.queries(&bodies, &colliders);
+    let huge = [0.0, 1.0, 1.0e10, 1.0e38, 3.0e38, f32::MAX, f32::INFINITY];
+    for &p in &huge[..6] {
+        for v in [0.0, 1.0, 1.0e10, 1.0e38] {
+            for &target_distance in &huge {
+                for max_time_of_impact in [1.0, 1.0e10, Real::MAX] {
+                    for shape in &shapes[1..3] {
+                        for sign in [1.0, -1.0] {
+                            let start = Isometry::translation(-p * sign, 0.1, 0.0);
+                            let vel = vector![v * sign, 0.0, 0.0];
+                            let options = ShapeCastOptions {
+                                max_time_of_impact,
+                                target_distance,
+                                stop_at_penetration: true,
+                                compute_impact_geometry_on_penetration: true,
+                            };
+                            let got = q.cast_shape(&start, &vel, &**shape, options);
+                            if p == 0.0 {
+                                // Parry's own casts are the truth: with the same options, as
+                                // Rapier passes them on, and for an infinite distance (which
+                                // overflows) with one past the farthest points instead (a hit
+                                // at time 0 either way, but with no velocity parry's cast
+                                // finds nothing).
+                                let truth_options = ShapeCastOptions {
+                                    target_distance: if target_distance.is_infinite() {
+                                        20.0
+                                    } else {
+                                        target_distance
+                                    },
+                                    ..options
+                                };
+                                let truth = colliders
+                                    .iter()
+                                    .filter_map(|(_, c)| {
+                                        parry_cast_time(c, &start, &vel, &**shape, truth_options)
+                                    })
+                                    .min_by(f32::total_cmp);
+                                if target_distance.is_infinite() {
+                                    assert_eq!(truth, (v != 0.0).then_some(0.0));
+                                }
+                                let got = got.map(|(_, hit)| hit.time_of_impact);
+                                assert_eq!(
+                                    got, truth,
+                                    "{v} {target_distance} {max_time_of_impact}"
+                                );
+                            }
+                            if p == f32::MAX && target_distance == f32::MAX {
+                                assert!(got.is_none(), "{p} {target_distance}: {got:?}");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

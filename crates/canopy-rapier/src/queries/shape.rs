@@ -46,8 +46,11 @@ impl<'a> SceneQueries<'a> {
     /// shapes are cast with the caller's limit, exactly as Rapier casts them. A negative
     /// target distance counts as 0, as parry's casts between convex shapes take it (its
     /// heightfield cast panics on one), and against a heightfield one past the two boxes'
-    /// farthest points is cut to that distance (a hit at time 0 either way); a NaN one, a NaN
-    /// or negative time limit, or a pose or velocity that is not finite gives `None`.
+    /// farthest points is cut to that distance (a hit at time 0 either way), as it is against
+    /// any shape where that distance and the target distance together pass `f32::MAX` (parry's
+    /// cast overflows there, and on some panics); a collider whose box is so far from the
+    /// moving shape's that the sum passes it even then is left out. A NaN target distance, a
+    /// NaN or negative time limit, or a pose or velocity that is not finite gives `None`.
     pub fn cast_shape(
         &self,
         shape_pos: &Isometry<Real>,
@@ -121,19 +124,38 @@ impl<'a> SceneQueries<'a> {
             if best.as_ref().is_some_and(|b| t > b.1.time_of_impact) {
                 break;
             }
+            // The distance between the farthest two points of the two boxes at time 0, summed
+            // in f64 (the squares overflow f32 past 1.8e19), infinite past f32's range.
+            let farthest = b
+                .merge(&start_box)
+                .extents()
+                .iter()
+                .map(|&e| f64::from(e) * f64::from(e))
+                .sum::<f64>()
+                .sqrt() as f32;
             // Against a heightfield, a target distance past the farthest two points of the two
             // boxes at time 0 is cut to that distance: either gives a hit at time 0, and parry's
             // heightfield cast overflows its cell indices on a huge one. Other shapes get the
             // caller's distance, as in Rapier (parry's answers there, with the shapes already
-            // within the distance, change with it: a cut would change them too).
+            // within the distance, change with it: a cut would change them too), unless it
+            // and that farthest distance together pass f32's range: parry's cast adds the
+            // distance to the shapes' coordinates, and overflows there (its GJK then fails an
+            // assertion of a finite bound and panics).
             let heightfield =
                 |s: &dyn Shape| matches!(s.as_typed_shape(), TypedShape::HeightField(_));
-            let target_distance = if heightfield(collider.shape()) || heightfield(shape) {
-                let farthest = b.merge(&start_box).extents().norm();
+            let overflows = |d: Real| !(farthest + d).is_finite();
+            let target_distance = if heightfield(collider.shape())
+                || heightfield(shape)
+                || overflows(options.target_distance)
+            {
                 options.target_distance.min(farthest)
             } else {
                 options.target_distance
             };
+            // Boxes so far apart that the sum overflows even so: the collider is left out.
+            if overflows(target_distance) {
+                continue;
+            }
             // Past the exit (with room for rounding) the boxes are apart: no hit. Two convex
             // shapes get the caller's limit, as in Rapier: parry's cast between them ends
             // on its own, and a grazing hit its tolerance finds just past the exit (shapes a
