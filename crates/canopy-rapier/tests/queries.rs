@@ -1202,3 +1202,68 @@ fn huge_positions_and_target_distances_do_not_panic() {
         }
     }
 }
+
+/// Shape casts against a heightfield that parry's cell walk cannot finish: from 1e16 and more
+/// away (its times of impact, rounded, no longer tell cells apart) and with a box grown by a
+/// huge target distance (millions of cells wide). Every cast returns (they ran forever before).
+/// Where parry's walk does finish, over a box wider than the walk is let to go (a cuboid 1,000
+/// wide over cells of 1.4), the cast of each triangle that canopy makes instead answers as
+/// parry's own cast does.
+#[test]
+fn shape_casts_too_wide_or_far_for_a_heightfields_walk_return() {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let heights = DMatrix::from_fn(8, 8, |i, j| ((i + j) % 3) as f32 * 0.1);
+        let mut answers = Vec::new();
+        for far in [1.0e4, 1.0e16, 1.0e19, 3.0e38] {
+            let bodies = RigidBodySet::new();
+            let mut colliders = ColliderSet::new();
+            let ground = colliders.insert(
+                ColliderBuilder::heightfield(heights.clone(), vector![10.0, 1.0, 10.0])
+                    .translation(vector![far, -far, far * 0.5]),
+            );
+            let over = QueriesOver::new(&colliders, &bodies);
+            let q = over.queries(&bodies, &colliders);
+            let start = Isometry::translation(far, 0.0, 0.2);
+            let vel = vector![0.0, -1.0, 0.5];
+            for (target_distance, half_width) in [(0.0, 0.4), (1.0e30, 0.4), (0.0, 500.0)] {
+                let options = ShapeCastOptions {
+                    max_time_of_impact: Real::MAX,
+                    target_distance,
+                    ..Default::default()
+                };
+                let cuboid = Cuboid::new(vector![half_width, 0.2, 0.3]);
+                let got = q
+                    .cast_shape(&start, &vel, &cuboid, options)
+                    .map(|(h, hit)| (h, hit.time_of_impact));
+                // Parry's own cast where its walk finishes: near, with a small distance, and a
+                // time limit (without one it walks cells forever once past the heightfield).
+                let bounded = ShapeCastOptions {
+                    max_time_of_impact: 4.0 * far,
+                    ..options
+                };
+                let truth = (far < 1.0e5 && target_distance == 0.0).then(|| {
+                    parry_cast_time(&colliders[ground], &start, &vel, &cuboid, bounded)
+                        .map(|t| (ground, t))
+                });
+                answers.push((far, target_distance, half_width, got, truth));
+            }
+        }
+        let _ = tx.send(answers);
+    });
+    let answers = rx.recv_timeout(std::time::Duration::from_secs(60));
+    let answers = answers.expect("the shape casts did not return");
+    for (far, target_distance, half_width, got, truth) in answers {
+        if let Some(truth) = truth {
+            assert!(truth.is_some(), "{far} {half_width}: parry finds no hit");
+            let same = match (got, truth) {
+                (Some((h1, t1)), Some((h2, t2))) => h1 == h2 && (t1 - t2).abs() <= 1.0e-3 * t2,
+                _ => false,
+            };
+            assert!(
+                same,
+                "{far} {target_distance} {half_width}: {got:?} against {truth:?}"
+            );
+        }
+    }
+}

@@ -3,8 +3,8 @@
 
 use super::{beyond_parts_reach, finite, valid_pose, SceneQueries};
 use canopy_core::Aabb;
-use rapier3d::parry::query::ShapeCastOptions;
-use rapier3d::parry::shape::TypedShape;
+use rapier3d::parry::query::{QueryDispatcher, ShapeCastOptions, Unsupported};
+use rapier3d::parry::shape::{HeightField, TypedShape};
 use rapier3d::prelude::{
     Collider, ColliderHandle, Isometry, Point, Real, Shape, ShapeCastHit, Vector,
 };
@@ -31,6 +31,78 @@ fn exit_room(b: &Aabb, origin: &Point<Real>) -> Aabb {
         .chain(origin.iter())
         .fold(0.0, |m: Real, c| m.max(c.abs()));
     b.loosened(EXIT_SLACK * size + EXIT_SLACK_ULPS * Real::EPSILON * largest)
+}
+
+/// Parry's cast against a heightfield walks, cell by cell along the motion, a range of cells as
+/// wide as the other shape's box grown by the target distance, once for each cell it moves on:
+/// its time grows with the square of that width, and a box millions of cells wide (a huge shape
+/// or target distance) never returns; nor does a box so far out (1e16 from a heightfield with
+/// cells of 1.4) that its coordinates' rounding spans millions of cells. Where either width is
+/// more than this many times the heightfield's own width in cells (and than
+/// [`WIDE_MIN_CELLS`]), each of the heightfield's triangles is cast against instead: the casts
+/// parry makes on the triangles in the box's path, and the others, which the box does not
+/// reach.
+const WIDE_FACTOR: usize = 4;
+/// See [`WIDE_FACTOR`].
+const WIDE_MIN_CELLS: usize = 256;
+
+/// `dispatcher.cast_shapes(pos12, vel12, g1, g2, options)` where one of the two shapes is a
+/// heightfield and the other's box, grown by the target distance, is too wide for parry's cell
+/// walk (see [`WIDE_FACTOR`]): the earliest of the casts against each of its triangles.
+/// `None` where neither is such a heightfield.
+fn cast_wide_heightfield(
+    dispatcher: &dyn QueryDispatcher,
+    pos12: &Isometry<Real>,
+    vel12: &Vector<Real>,
+    g1: &dyn Shape,
+    g2: &dyn Shape,
+    options: ShapeCastOptions,
+) -> Option<Result<Option<ShapeCastHit>, Unsupported>> {
+    // The other shape's box in the heightfield's frame, grown by the target distance, is wider
+    // than the walk allows, or so far out that the rounding of its coordinates is (the walk
+    // then steps through cells its times of impact, rounded alike, cannot tell apart). A NaN
+    // width counts as too wide.
+    let too_wide = |hf: &HeightField, other: &dyn Shape, pose: &Isometry<Real>| {
+        let b = other.compute_aabb(pose);
+        let e = b.extents().add_scalar(2.0 * options.target_distance);
+        let largest = b.mins.coords.abs().max().max(b.maxs.coords.abs().max());
+        let (cw, ch) = (hf.cell_width().abs(), hf.cell_height().abs());
+        let cells = (e.x / cw)
+            .max(e.z / ch)
+            .max(largest * Real::EPSILON / cw.min(ch));
+        let (ni, nj) = hf.num_cells_ij();
+        !(cells <= (WIDE_FACTOR * ni.max(nj)).max(WIDE_MIN_CELLS) as Real)
+    };
+    let earliest = |casts: &mut dyn Iterator<Item = Result<Option<ShapeCastHit>, Unsupported>>| {
+        let mut best: Option<ShapeCastHit> = None;
+        for hit in casts {
+            if let Some(hit) = hit? {
+                if best.is_none_or(|b| hit.time_of_impact < b.time_of_impact) {
+                    best = Some(hit);
+                }
+            }
+        }
+        Ok(best)
+    };
+    if let Some(hf) = g1.as_heightfield() {
+        too_wide(hf, g2, pos12).then(|| {
+            earliest(
+                &mut hf
+                    .triangles()
+                    .map(|t| dispatcher.cast_shapes(pos12, vel12, &t, g2, options)),
+            )
+        })
+    } else if let Some(hf) = g2.as_heightfield() {
+        too_wide(hf, g1, &pos12.inverse()).then(|| {
+            earliest(
+                &mut hf
+                    .triangles()
+                    .map(|t| dispatcher.cast_shapes(pos12, vel12, g1, &t, options)),
+            )
+        })
+    } else {
+        None
+    }
 }
 
 impl<'a> SceneQueries<'a> {
@@ -173,13 +245,22 @@ impl<'a> SceneQueries<'a> {
                 ..options
             };
             let pos = collider.position();
-            let hit = self.dispatcher.cast_shapes(
-                &pos.inv_mul(shape_pos),
-                &pos.inverse_transform_vector(shape_vel),
+            let (pos12, vel12) = (
+                pos.inv_mul(shape_pos),
+                pos.inverse_transform_vector(shape_vel),
+            );
+            let hit = cast_wide_heightfield(
+                self.dispatcher,
+                &pos12,
+                &vel12,
                 collider.shape(),
                 shape,
                 options,
-            );
+            )
+            .unwrap_or_else(|| {
+                self.dispatcher
+                    .cast_shapes(&pos12, &vel12, collider.shape(), shape, options)
+            });
             if let Ok(Some(hit)) = hit {
                 if best
                     .as_ref()
