@@ -71,7 +71,7 @@ fn cast_wide_heightfield(
             .max(e.z / ch)
             .max(largest * Real::EPSILON / cw.min(ch));
         let (ni, nj) = hf.num_cells_ij();
-        !(cells <= (WIDE_FACTOR * ni.max(nj)).max(WIDE_MIN_CELLS) as Real)
+        cells.is_nan() || cells > (WIDE_FACTOR * ni.max(nj)).max(WIDE_MIN_CELLS) as Real
     };
     let earliest = |casts: &mut dyn Iterator<Item = Result<Option<ShapeCastHit>, Unsupported>>| {
         let mut best: Option<ShapeCastHit> = None;
