@@ -121,8 +121,12 @@ impl<'a> SceneQueries<'a> {
     /// farthest points is cut to that distance (a hit at time 0 either way), as it is against
     /// any shape where that distance and the target distance together pass `f32::MAX` (parry's
     /// cast overflows there, and on some panics); a collider whose box is so far from the
-    /// moving shape's that the sum passes it even then is left out. A NaN target distance, a
-    /// NaN or negative time limit, or a pose or velocity that is not finite gives `None`.
+    /// moving shape's that the sum passes it even then is left out. Against a heightfield,
+    /// where the other shape's box is too wide or too far for parry's walk over its cells
+    /// (more than four times the heightfield's width in cells, and 256, across or in the
+    /// rounding of its coordinates), each of its triangles is cast against instead. A NaN target
+    /// distance, a NaN or negative time limit, or a pose or velocity that is not finite gives
+    /// `None`.
     pub fn cast_shape(
         &self,
         shape_pos: &Isometry<Real>,
