@@ -16,21 +16,46 @@ pub type TruthPair = (usize, usize, Vec<Manifold>);
 /// `DefaultQueryDispatcher.contact_manifolds(pose_i⁻¹·pose_j, shape_i, shape_j, prediction)`
 /// called fresh on pair `(i, j)`: its manifolds when some point is within `prediction` (see
 /// [`in_contact`]). `None` also when `i` or `j` is not an index of `objects`, for a
-/// `prediction` that is negative, NaN or infinite, and for a pose that
-/// [`check_pose`](crate::check_pose) refuses (parry panics on some of these: a negative
-/// prediction against a mesh, a NaN rotation).
+/// `prediction` that is negative, NaN or infinite, and for an object the world would refuse
+/// at this prediction distance: a pose that [`check_pose`](crate::check_pose) refuses, a
+/// shape that [`check_shape`](crate::check_shape) refuses, or a box (in the shape's own
+/// frame, or at its pose grown by `prediction`) that [`check_bounds`](crate::check_bounds)
+/// refuses, i.e. one reaching beyond ±[`MAX_COORDINATE`](crate::MAX_COORDINATE). Parry
+/// panics on some of these: a negative prediction against a mesh, a NaN rotation, a convex
+/// hull without faces, coordinates near `f32::MAX`.
 pub fn pair(
     objects: &[(Isometry3<f32>, SharedShape)],
     i: usize,
     j: usize,
     prediction: f32,
 ) -> Option<Vec<Manifold>> {
-    let (pose1, shape1) = objects.get(i)?;
-    let (pose2, shape2) = objects.get(j)?;
-    let valid = |pose| crate::validate::check_pose(pose).is_ok();
-    if !(prediction.is_finite() && prediction >= 0.0 && valid(pose1) && valid(pose2)) {
+    let object1 = objects.get(i)?;
+    let object2 = objects.get(j)?;
+    let valid = valid_prediction(prediction)
+        && valid_object(object1, prediction)
+        && valid_object(object2, prediction);
+    if !valid {
         return None;
     }
+    manifolds(object1, object2, prediction)
+}
+
+/// `true` for a finite prediction distance `>= 0`.
+fn valid_prediction(prediction: f32) -> bool {
+    prediction.is_finite() && prediction >= 0.0
+}
+
+/// `true` when the world would accept `shape` at `pose` with this prediction distance.
+fn valid_object((pose, shape): &(Isometry3<f32>, SharedShape), prediction: f32) -> bool {
+    crate::validate::check_object(&**shape, pose, prediction).is_ok()
+}
+
+/// The parry call of [`pair`], on objects already checked.
+fn manifolds(
+    (pose1, shape1): &(Isometry3<f32>, SharedShape),
+    (pose2, shape2): &(Isometry3<f32>, SharedShape),
+    prediction: f32,
+) -> Option<Vec<Manifold>> {
     let pos12 = pose1.inv_mul(pose2);
     let mut manifolds = Vec::new();
     DefaultQueryDispatcher
@@ -46,12 +71,26 @@ pub fn pair(
     in_contact(&manifolds, prediction).then_some(manifolds)
 }
 
-/// Every pair `i < j` in contact, in order, one thread.
+/// Whether each object passes the checks of [`pair`] (all `false` for an invalid
+/// `prediction`): each object is checked once, not once per pair.
+fn valid_objects(objects: &[(Isometry3<f32>, SharedShape)], prediction: f32) -> Vec<bool> {
+    let ok = valid_prediction(prediction);
+    objects
+        .iter()
+        .map(|o| ok && valid_object(o, prediction))
+        .collect()
+}
+
+/// Every pair `i < j` in contact, in order, one thread: [`pair`] on each pair, so pairs with
+/// an object the world would refuse are left out.
 pub fn contact_pairs(objects: &[(Isometry3<f32>, SharedShape)], prediction: f32) -> Vec<TruthPair> {
+    let valid = valid_objects(objects, prediction);
     let n = objects.len();
     (0..n)
+        .filter(|&i| valid[i])
         .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
-        .filter_map(|(i, j)| pair(objects, i, j, prediction).map(|m| (i, j, m)))
+        .filter(|&(_, j)| valid[j])
+        .filter_map(|(i, j)| manifolds(&objects[i], &objects[j], prediction).map(|m| (i, j, m)))
         .collect()
 }
 
@@ -60,11 +99,16 @@ pub fn par_contact_pairs(
     objects: &[(Isometry3<f32>, SharedShape)],
     prediction: f32,
 ) -> Vec<TruthPair> {
+    let valid = valid_objects(objects, prediction);
+    let valid = &valid;
     let n = objects.len();
     (0..n)
         .into_par_iter()
+        .filter(|&i| valid[i])
         .flat_map_iter(|i| {
-            (i + 1..n).filter_map(move |j| pair(objects, i, j, prediction).map(|m| (i, j, m)))
+            (i + 1..n).filter(move |&j| valid[j]).filter_map(move |j| {
+                manifolds(&objects[i], &objects[j], prediction).map(|m| (i, j, m))
+            })
         })
         .collect()
 }
@@ -208,5 +252,96 @@ mod tests {
             .map(|(i, j, _)| (i, j))
             .collect();
         assert_eq!(found, vec![(0, 1)]);
+    }
+
+    /// An object the world refuses gives `None` and is left out of `contact_pairs`, where
+    /// parry panicked: coordinates near `f32::MAX` (`sqnab != 0.0` in `point_segment.rs`), a
+    /// triangle reaching 3e38 (`min_bound.is_finite()` in GJK), a convex hull with no face
+    /// (index out of bounds in `local_support_feature`). The prediction distance counts, as
+    /// in the world: two balls near `MAX_COORDINATE` are in range at 0 and out at 2000.
+    #[test]
+    fn objects_the_world_refuses_give_none() {
+        use crate::{CollisionError, CollisionWorld, MAX_COORDINATE};
+        use nalgebra::{Translation3, UnitQuaternion};
+        let tiny = 1.0e-8;
+        let hull = SharedShape::convex_hull(&[
+            Point3::origin(),
+            Point3::new(tiny, 0.0, 0.0),
+            Point3::new(0.0, tiny, 0.0),
+            Point3::new(0.0, 0.0, tiny),
+        ])
+        .unwrap();
+        let tilted = Isometry3::from_parts(
+            Translation3::new(0.3, 0.0, 0.0),
+            UnitQuaternion::from_euler_angles(1.0, 2.0, 3.0),
+        );
+        let near = MAX_COORDINATE - 1000.0;
+        let objects = vec![
+            (Isometry3::identity(), SharedShape::cuboid(1.0, 1.0, 1.0)),
+            (
+                Isometry3::translation(1.5, 0.0, 0.0),
+                SharedShape::ball(1.0),
+            ),
+            (
+                Isometry3::translation(-f32::MAX, 0.0, 0.0),
+                SharedShape::ball(1.0),
+            ),
+            (
+                Isometry3::translation(f32::MAX, 0.0, 0.0),
+                SharedShape::capsule_y(1.0e-45, 1.0),
+            ),
+            (
+                tilted,
+                SharedShape::segment(Point3::new(0.0, -1.0, 0.0), Point3::new(0.0, 1.0, 0.0)),
+            ),
+            (
+                Isometry3::identity(),
+                SharedShape::triangle(
+                    Point3::origin(),
+                    Point3::new(1.0, 0.0, 0.0),
+                    Point3::new(0.0, 3.0e38, 0.0),
+                ),
+            ),
+            (Isometry3::identity(), hull),
+            (
+                Isometry3::translation(near, 0.0, 0.0),
+                SharedShape::ball(1.0),
+            ),
+            (
+                Isometry3::translation(near, 0.0, 0.0),
+                SharedShape::ball(1.0),
+            ),
+        ];
+        let refused = [2, 3, 5, 6];
+        for (i, j) in [(2, 3), (4, 5), (0, 6), (6, 1), (0, 2), (3, 1), (0, 5)] {
+            assert!(pair(&objects, i, j, 0.0).is_none(), "({i}, {j})");
+        }
+        assert!(pair(&objects, 0, 1, 0.0).is_some());
+        assert!(pair(&objects, 0, 4, 0.0).is_some());
+        assert!(pair(&objects, 7, 8, 0.0).is_some());
+        assert!(pair(&objects, 7, 8, 2000.0).is_none());
+        let found = contact_pairs(&objects, 0.0);
+        let pairs: Vec<(usize, usize)> = found.iter().map(|p| (p.0, p.1)).collect();
+        assert!(pairs.contains(&(0, 1)) && pairs.contains(&(0, 4)) && pairs.contains(&(7, 8)));
+        assert!(pairs
+            .iter()
+            .all(|(i, j)| !refused.contains(i) && !refused.contains(j)));
+        let par: Vec<(usize, usize)> = par_contact_pairs(&objects, 0.0)
+            .iter()
+            .map(|p| (p.0, p.1))
+            .collect();
+        assert_eq!(pairs, par);
+        // The world draws the same lines.
+        let mut world = CollisionWorld::new();
+        for (k, (pose, shape)) in objects.iter().enumerate() {
+            let result = world.insert(shape.clone(), *pose, k);
+            assert_eq!(
+                result.is_err(),
+                refused.contains(&k),
+                "object {k}: {result:?}"
+            );
+        }
+        world.update(0.0).unwrap();
+        assert_eq!(world.update(2000.0), Err(CollisionError::OutOfRange));
     }
 }

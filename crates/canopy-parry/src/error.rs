@@ -14,7 +14,8 @@ pub enum CollisionError {
     /// A pose with a NaN or infinite component, or a rotation that is not a unit quaternion.
     #[error("invalid pose: translation must be finite and rotation a finite unit quaternion")]
     InvalidPose,
-    /// A shape with NaN / infinite parameters, a non-positive size, or broken mesh indices.
+    /// A shape with NaN / infinite parameters, a non-positive size, broken mesh indices, or a
+    /// convex polyhedron without faces.
     #[error("degenerate shape: {0}")]
     DegenerateShape(String),
     /// A shape type the world does not handle (half-spaces, height fields, polylines, voxels,

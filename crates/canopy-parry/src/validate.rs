@@ -4,8 +4,10 @@
 
 use canopy_core::Aabb;
 use nalgebra::{Isometry3, Point3, Vector3};
-use parry3d::shape::{Shape, TypedShape};
+use parry3d::bounding_volume::BoundingVolume;
+use parry3d::shape::{ConvexPolyhedron, Shape, TypedShape};
 
+use crate::convert::to_canopy;
 use crate::error::CollisionError;
 
 /// Largest coordinate magnitude of an object's world-space bounding box (prediction margin
@@ -22,6 +24,26 @@ pub fn check_bounds(aabb: &Aabb) -> Result<(), CollisionError> {
     } else {
         Err(CollisionError::OutOfRange)
     }
+}
+
+/// The box of `shape` placed at `pose`, grown by `margin`: the box the world keeps for a
+/// shape object and checks with [`check_bounds`].
+pub(crate) fn shape_aabb(shape: &dyn Shape, pose: &Isometry3<f32>, margin: f32) -> Aabb {
+    to_canopy(&shape.compute_aabb(pose).loosened(margin))
+}
+
+/// The checks the world makes on a shape object: [`check_pose`], [`check_shape`] (composites
+/// allowed), and [`check_bounds`] on its box in its own frame and on its box at `pose` grown
+/// by `margin` (the prediction distance).
+pub(crate) fn check_object(
+    shape: &dyn Shape,
+    pose: &Isometry3<f32>,
+    margin: f32,
+) -> Result<(), CollisionError> {
+    check_pose(pose)?;
+    check_shape(shape, true)?;
+    check_bounds(&shape_aabb(shape, &Isometry3::identity(), 0.0))?;
+    check_bounds(&shape_aabb(shape, pose, margin))
 }
 
 /// Largest accepted deviation of a rotation quaternion's norm from 1.
@@ -150,17 +172,10 @@ pub fn check_shape(shape: &dyn Shape, allow_composite: bool) -> Result<(), Colli
                 return Err(degenerate("cone needs a half-height and radius > 0"));
             }
         }
-        TypedShape::ConvexPolyhedron(p) => {
-            if p.points().len() < 4 || !p.points().iter().all(finite_point) {
-                return Err(degenerate("convex polyhedron needs >= 4 finite points"));
-            }
-        }
+        TypedShape::ConvexPolyhedron(p) => check_polyhedron(p)?,
         TypedShape::RoundConvexPolyhedron(p) => {
             border(p.border_radius)?;
-            let pts = p.inner_shape.points();
-            if pts.len() < 4 || !pts.iter().all(finite_point) {
-                return Err(degenerate("convex polyhedron needs >= 4 finite points"));
-            }
+            check_polyhedron(&p.inner_shape)?;
         }
         TypedShape::TriMesh(m) if allow_composite => {
             check_mesh_buffers(m.vertices(), m.indices())?;
@@ -179,6 +194,21 @@ pub fn check_shape(shape: &dyn Shape, allow_composite: bool) -> Result<(), Colli
             let name = name.split('(').next().unwrap_or("unknown").to_string();
             return Err(CollisionError::UnsupportedShape(name));
         }
+    }
+    Ok(())
+}
+
+/// A convex polyhedron needs at least 4 finite points and at least one face: parry builds
+/// one with no face from a hull too small for its tolerances (a tetrahedron of side 1e-8),
+/// and its polygonal-feature code then indexes the first face and panics.
+fn check_polyhedron(p: &ConvexPolyhedron) -> Result<(), CollisionError> {
+    if p.points().len() < 4 || !p.points().iter().all(finite_point) {
+        return Err(degenerate("convex polyhedron needs >= 4 finite points"));
+    }
+    if p.faces().is_empty() {
+        return Err(degenerate(
+            "convex polyhedron has no face (points too close together)",
+        ));
     }
     Ok(())
 }

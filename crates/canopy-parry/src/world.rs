@@ -6,7 +6,6 @@ use std::time::Instant;
 
 use canopy_core::{Aabb, BuildOptions, Builder, Bvh};
 use nalgebra::{Isometry3, Point3};
-use parry3d::bounding_volume::BoundingVolume;
 use parry3d::shape::SharedShape;
 use rayon::prelude::*;
 
@@ -21,7 +20,7 @@ use crate::pair::ContactPair;
 use crate::parts::{build_part_tree, composite_part_aabbs, Parts};
 use crate::self_contact::{self_contacts, SelfContact};
 use crate::stats::UpdateStats;
-use crate::validate::{check_bounds, check_pose, check_shape};
+use crate::validate::{check_bounds, check_pose, check_shape, shape_aabb};
 
 const NONE: u32 = u32::MAX;
 
@@ -77,7 +76,7 @@ impl Object {
     fn world_aabb(&self, pose: &Isometry3<f32>, margin: f32) -> Aabb {
         match &self.kind {
             Kind::Convex(shape) | Kind::Composite { shape, .. } => {
-                to_canopy(&shape.compute_aabb(pose).loosened(margin))
+                shape_aabb(&**shape, pose, margin)
             }
             Kind::Deformable(mesh) => match mesh.tree.root_aabb() {
                 Some(root) => to_canopy(&to_parry(&root).transform_by(pose)),
@@ -202,8 +201,9 @@ impl<T> CollisionWorld<T> {
     ///
     /// # Errors
     /// [`CollisionError::InvalidPose`], [`CollisionError::DegenerateShape`] (NaN, zero or
-    /// negative sizes, broken mesh indices), [`CollisionError::UnsupportedShape`],
-    /// [`CollisionError::OutOfRange`], [`CollisionError::TooMany`].
+    /// negative sizes, broken mesh indices, a convex polyhedron without faces),
+    /// [`CollisionError::UnsupportedShape`], [`CollisionError::OutOfRange`],
+    /// [`CollisionError::TooMany`].
     pub fn insert(
         &mut self,
         shape: SharedShape,

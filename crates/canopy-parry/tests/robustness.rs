@@ -261,3 +261,67 @@ proptest! {
         let _ = world.update(0.01);
     }
 }
+
+/// A convex hull of points too close together for parry's tolerances (a tetrahedron of side
+/// 1e-8) has no face, and parry's contact code indexes its first face and panics (index out of
+/// bounds in `ConvexPolyhedron::local_support_feature`): as a plain, round or mesh-built hull,
+/// alone or in a compound, insert refuses it. A hull of side 1 is still accepted.
+#[test]
+fn convex_hulls_without_faces_are_refused() {
+    let tetrahedron = |side: f32| {
+        vec![
+            Point3::origin(),
+            Point3::new(side, 0.0, 0.0),
+            Point3::new(0.0, side, 0.0),
+            Point3::new(0.0, 0.0, side),
+        ]
+    };
+    let faces = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+    let hulls = |side: f32| {
+        let points = tetrahedron(side);
+        let hull = SharedShape::convex_hull(&points).unwrap();
+        let round = SharedShape::round_convex_hull(&points, 0.1).unwrap();
+        let in_compound = |part: &SharedShape| {
+            SharedShape::compound(vec![
+                (Isometry3::identity(), SharedShape::ball(0.5)),
+                (pose(0.5), part.clone()),
+            ])
+        };
+        vec![
+            in_compound(&hull),
+            in_compound(&round),
+            SharedShape::convex_mesh(points, &faces).unwrap(),
+            hull,
+            round,
+        ]
+    };
+    let mut world = CollisionWorld::new();
+    world
+        .insert(
+            SharedShape::cuboid(1.0, 1.0, 1.0),
+            Isometry3::identity(),
+            (),
+        )
+        .unwrap();
+    for shape in hulls(1.0e-8) {
+        if let Some(p) = shape.as_convex_polyhedron() {
+            assert!(p.faces().is_empty(), "parry now gives this hull faces");
+        }
+        for x in [0.0, 0.5] {
+            let r = world.insert(shape.clone(), pose(x), ());
+            assert!(
+                matches!(&r, Err(CollisionError::DegenerateShape(m)) if m.contains("no face")),
+                "{:?} at x = {x}: {r:?}",
+                shape.shape_type()
+            );
+        }
+    }
+    assert_eq!(world.len(), 1);
+    world.update(0.0).unwrap();
+    for shape in hulls(1.0) {
+        world.insert(shape, pose(0.5), ()).unwrap();
+    }
+    world.update(0.0).unwrap();
+    // Each hull overlaps the cuboid (and the hulls overlap each other).
+    assert!(world.contact_pairs().count() >= 5);
+}
