@@ -41,8 +41,10 @@ fn exit_room(b: &Aabb, origin: &Point<Real>) -> Aabb {
 /// more than this many times the heightfield's own width in cells (and than
 /// [`WIDE_MIN_CELLS`]), each of the heightfield's triangles is cast against instead: the casts
 /// parry makes on the triangles in the box's path, and the others, which the box does not
-/// reach.
-const WIDE_FACTOR: usize = 4;
+/// reach. The factor weighs the two: the walk's cheap steps, about width times (width plus
+/// the heightfield's width), against one cast per triangle, some hundred times the cost of a
+/// step, for two triangles per cell.
+const WIDE_FACTOR: usize = 32;
 /// See [`WIDE_FACTOR`].
 const WIDE_MIN_CELLS: usize = 256;
 
@@ -123,7 +125,7 @@ impl<'a> SceneQueries<'a> {
     /// cast overflows there, and on some panics); a collider whose box is so far from the
     /// moving shape's that the sum passes it even then is left out. Against a heightfield,
     /// where the other shape's box is too wide or too far for parry's walk over its cells
-    /// (more than four times the heightfield's width in cells, and 256, across or in the
+    /// (more than 32 times the heightfield's width in cells, and 256, across or in the
     /// rounding of its coordinates), each of its triangles is cast against instead. A NaN target
     /// distance, a NaN or negative time limit, or a pose or velocity that is not finite gives
     /// `None`.
