@@ -1203,9 +1203,10 @@ fn huge_positions_and_target_distances_do_not_panic() {
     }
 }
 
-/// Shape casts against a heightfield that parry's cell walk cannot finish: from 1e16 and more
-/// away (its times of impact, rounded, no longer tell cells apart) and with a box grown by a
-/// huge target distance (millions of cells wide). Every cast returns (they ran forever before).
+/// Shape casts against a heightfield, alone or as a compound's part, that parry's cell walk
+/// cannot finish: from 1e16 and more away (its times of impact, rounded, no longer tell cells
+/// apart) and with a box grown by a huge target distance (millions of cells wide). Every cast
+/// returns (they ran forever before).
 /// Where parry's walk does finish, over a box wider than the walk is let to go (a cuboid 1,000
 /// wide over cells of 1.4), the cast of each triangle that canopy makes instead answers as
 /// parry's own cast does.
@@ -1215,13 +1216,27 @@ fn shape_casts_too_wide_or_far_for_a_heightfields_walk_return() {
     std::thread::spawn(move || {
         let heights = DMatrix::from_fn(8, 8, |i, j| ((i + j) % 3) as f32 * 0.1);
         let mut answers = Vec::new();
-        for far in [1.0e4, 1.0e16, 1.0e19, 3.0e38] {
+        let heightfield = SharedShape::heightfield(heights, vector![10.0, 1.0, 10.0]);
+        // The heightfield alone, and as a part of a compound (parry's compound cast walks its
+        // cells too).
+        let compound = SharedShape::compound(vec![
+            (Isometry::translation(0.0, 0.5, 0.0), heightfield.clone()),
+            (
+                Isometry::translation(20.0, 0.0, 0.0),
+                SharedShape::ball(0.5),
+            ),
+        ]);
+        for (far, shape) in [1.0e4, 1.0e16, 1.0e19, 3.0e38]
+            .into_iter()
+            .flat_map(|far| [(far, heightfield.clone()), (far, compound.clone())])
+        {
             let bodies = RigidBodySet::new();
             let mut colliders = ColliderSet::new();
-            let ground = colliders.insert(
-                ColliderBuilder::heightfield(heights.clone(), vector![10.0, 1.0, 10.0])
-                    .translation(vector![far, -far, far * 0.5]),
-            );
+            let ground = colliders.insert(ColliderBuilder::new(shape).translation(vector![
+                far,
+                -far,
+                far * 0.5
+            ]));
             let over = QueriesOver::new(&colliders, &bodies);
             let q = over.queries(&bodies, &colliders);
             let start = Isometry::translation(far, 0.0, 0.2);

@@ -4,7 +4,7 @@
 use super::{beyond_parts_reach, finite, valid_pose, SceneQueries};
 use canopy_core::Aabb;
 use rapier3d::parry::query::{QueryDispatcher, ShapeCastOptions, Unsupported};
-use rapier3d::parry::shape::{HeightField, TypedShape};
+use rapier3d::parry::shape::{Compound, HeightField, TypedShape};
 use rapier3d::prelude::{
     Collider, ColliderHandle, Isometry, Point, Real, Shape, ShapeCastHit, Vector,
 };
@@ -49,9 +49,10 @@ const WIDE_FACTOR: usize = 32;
 const WIDE_MIN_CELLS: usize = 256;
 
 /// `dispatcher.cast_shapes(pos12, vel12, g1, g2, options)` where one of the two shapes is a
-/// heightfield and the other's box, grown by the target distance, is too wide for parry's cell
-/// walk (see [`WIDE_FACTOR`]): the earliest of the casts against each of its triangles.
-/// `None` where neither is such a heightfield.
+/// heightfield, or a compound with a heightfield part, and the other's box, grown by the
+/// target distance, is too wide for parry's cell walk (see [`WIDE_FACTOR`]): the earliest of
+/// the casts against each of its triangles (and the compound's other parts). `None` where
+/// neither is such a shape.
 fn cast_wide_heightfield(
     dispatcher: &dyn QueryDispatcher,
     pos12: &Isometry<Real>,
@@ -86,6 +87,34 @@ fn cast_wide_heightfield(
         }
         Ok(best)
     };
+    // A compound with such a heightfield among its parts: each part cast by itself, through
+    // this function (parry's compound cast hands its parts to its own dispatcher, walk and
+    // all). The hits come back in the compound's frame.
+    let wide_part = |c: &Compound, other: &dyn Shape, other_pose: &Isometry<Real>| {
+        c.shapes().iter().any(|(p, s)| {
+            s.as_heightfield()
+                .is_some_and(|hf| too_wide(hf, other, &p.inv_mul(other_pose)))
+        })
+    };
+    let cast = |pos12: &Isometry<Real>, vel12: &Vector<Real>, g1: &dyn Shape, g2: &dyn Shape| {
+        cast_wide_heightfield(dispatcher, pos12, vel12, g1, g2, options)
+            .unwrap_or_else(|| dispatcher.cast_shapes(pos12, vel12, g1, g2, options))
+    };
+    if let Some(c) = g1.as_compound().filter(|c| wide_part(c, g2, pos12)) {
+        return Some(earliest(&mut c.shapes().iter().map(|(p, s)| {
+            let (pos, vel) = (p.inv_mul(pos12), p.inverse_transform_vector(vel12));
+            cast(&pos, &vel, &**s, g2).map(|hit| hit.map(|h| h.transform1_by(p)))
+        })));
+    }
+    if let Some(c) = g2
+        .as_compound()
+        .filter(|c| wide_part(c, g1, &pos12.inverse()))
+    {
+        return Some(earliest(&mut c.shapes().iter().map(|(p, s)| {
+            cast(&(pos12 * p), vel12, g1, &**s)
+                .map(|hit| hit.map(|h| h.swapped().transform1_by(p).swapped()))
+        })));
+    }
     if let Some(hf) = g1.as_heightfield() {
         too_wide(hf, g2, pos12).then(|| {
             earliest(
