@@ -240,6 +240,9 @@ impl<'a> SceneQueries<'a> {
                 .map(|&e| f64::from(e) * f64::from(e))
                 .sum::<f64>()
                 .sqrt() as f32;
+            // Two convex shapes (neither a heightfield nor a compound) skip every check that
+            // concerns those.
+            let convex = collider.shape().is_convex() && shape.is_convex();
             // Against a heightfield, a target distance past the farthest two points of the two
             // boxes at time 0 is cut to that distance: either gives a hit at time 0, and parry's
             // heightfield cast overflows its cell indices on a huge one. Other shapes get the
@@ -251,8 +254,8 @@ impl<'a> SceneQueries<'a> {
             let heightfield =
                 |s: &dyn Shape| matches!(s.as_typed_shape(), TypedShape::HeightField(_));
             let overflows = |d: Real| !(farthest + d).is_finite();
-            let target_distance = if heightfield(collider.shape())
-                || heightfield(shape)
+            let target_distance = if (!convex
+                && (heightfield(collider.shape()) || heightfield(shape)))
                 || overflows(options.target_distance)
             {
                 options.target_distance.min(farthest)
@@ -267,7 +270,7 @@ impl<'a> SceneQueries<'a> {
             // shapes get the caller's limit, as in Rapier: parry's cast between them ends
             // on its own, and a grazing hit its tolerance finds just past the exit (shapes a
             // few thousandths farther apart than the target distance) is then Rapier's too.
-            let limit = if collider.shape().is_convex() && shape.is_convex() {
+            let limit = if convex {
                 max_toi
             } else {
                 let room = exit_room(&grown(&b, target_distance), &center);
@@ -284,15 +287,17 @@ impl<'a> SceneQueries<'a> {
                 pos.inv_mul(shape_pos),
                 pos.inverse_transform_vector(shape_vel),
             );
-            let hit = cast_wide_heightfield(
-                self.dispatcher,
-                &pos12,
-                &vel12,
-                collider.shape(),
-                shape,
-                options,
-            )
-            .unwrap_or_else(|| {
+            let wide = (!convex).then(|| {
+                cast_wide_heightfield(
+                    self.dispatcher,
+                    &pos12,
+                    &vel12,
+                    collider.shape(),
+                    shape,
+                    options,
+                )
+            });
+            let hit = wide.flatten().unwrap_or_else(|| {
                 self.dispatcher
                     .cast_shapes(&pos12, &vel12, collider.shape(), shape, options)
             });
