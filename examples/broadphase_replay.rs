@@ -287,7 +287,10 @@ fn split(
         rapier / canopy
     );
     #[cfg(feature = "phase-times")]
-    print_phases_by_kind(&KINDS, &runs);
+    {
+        print_phases_by_kind(&KINDS, &runs, |_, u| u.2);
+        print_phases_by_kind(&CALLS, &runs, |i, _| (i + 1) % 2);
+    }
 }
 
 /// Canopy's phases when timed (feature `phase-times`); nothing otherwise.
@@ -296,19 +299,28 @@ type Phases = canopy::rapier::PhaseTimes;
 #[cfg(not(feature = "phase-times"))]
 type Phases = ();
 
-/// With the `phase-times` feature, `split` also prints canopy's phases by kind of update: the
-/// mean over the repetitions, in µs per update of that kind (the timers' own cost, a clock
+/// With the `phase-times` feature, `split` also prints canopy's phases by group of updates
+/// (`group` gives an update's group from its index and record; `kinds` names the groups): the
+/// mean over the repetitions, in µs per update of that group (the timers' own cost, a clock
 /// read per phase, is included).
 #[cfg(feature = "phase-times")]
-fn print_phases_by_kind(kinds: &[&str], runs: &[Vec<(f64, f64, usize, Phases)>]) {
+fn print_phases_by_kind(
+    kinds: &[&str],
+    runs: &[Vec<(f64, f64, usize, Phases)>],
+    group: impl Fn(usize, &(f64, f64, usize, Phases)) -> usize,
+) {
     println!(
-        "  canopy's phases by kind (µs per update, mean of {} runs):",
+        "  canopy's phases by group (µs per update, mean of {} runs):",
         runs.len()
     );
     for (k, label) in kinds.iter().enumerate() {
         let mut sum = Phases::default();
         let mut updates = 0usize;
-        for (_, _, _, t) in runs.iter().flatten().filter(|u| u.2 == k) {
+        let of_group = runs
+            .iter()
+            .flat_map(|r| r.iter().enumerate())
+            .filter(|(i, u)| group(*i, u) == k);
+        for (_, (_, _, _, t)) in of_group {
             updates += 1;
             sum += *t;
         }
