@@ -26,8 +26,8 @@
 //! ratio evolves through the scene). It shows where canopy's time goes against
 //! Rapier's, which the totals of `ab` and of the criterion bench hide (`spawn_storm`: the
 //! updates where the first layers fall together cost canopy more than Rapier). Built with
-//! `--features phase-times`, `split` also prints canopy's phase timers by kind of update (the
-//! mean over the five runs, µs per update).
+//! `--features phase-times`, `split` also prints canopy's phase timers by kind of update and by
+//! call (the mean over the five runs, µs per update).
 
 use canopy::rapier::{CanopyBroadPhase, CanopyBroadPhaseConfig};
 use canopy::scenes::harness::{record, replay, replay_timed, AabbFloor, RecordedUpdate};
