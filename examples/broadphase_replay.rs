@@ -288,8 +288,8 @@ fn split(
     );
     #[cfg(feature = "phase-times")]
     {
-        print_phases_by_kind(&KINDS, &runs, |_, u| u.2);
-        print_phases_by_kind(&CALLS, &runs, |i, _| (i + 1) % 2);
+        print_phases_by_group("kind", &KINDS, &runs, |_, u| u.2);
+        print_phases_by_group("call", &CALLS, &runs, |i, _| (i + 1) % 2);
     }
 }
 
@@ -300,17 +300,18 @@ type Phases = canopy::rapier::PhaseTimes;
 type Phases = ();
 
 /// With the `phase-times` feature, `split` also prints canopy's phases by group of updates
-/// (`group` gives an update's group from its index and record; `kinds` names the groups): the
-/// mean over the repetitions, in µs per update of that group (the timers' own cost, a clock
-/// read per phase, is included).
+/// (`group` gives an update's group from its index and record; `kinds` names the groups, `what`
+/// what they group by): the mean over the repetitions, in µs per update of that group (the
+/// timers' own cost, a clock read per phase, is included).
 #[cfg(feature = "phase-times")]
-fn print_phases_by_kind(
+fn print_phases_by_group(
+    what: &str,
     kinds: &[&str],
     runs: &[Vec<(f64, f64, usize, Phases)>],
     group: impl Fn(usize, &(f64, f64, usize, Phases)) -> usize,
 ) {
     println!(
-        "  canopy's phases by group (µs per update, mean of {} runs):",
+        "  canopy's phases by {what} (µs per update, mean of {} runs):",
         runs.len()
     );
     for (k, label) in kinds.iter().enumerate() {
