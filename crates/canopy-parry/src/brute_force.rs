@@ -6,9 +6,14 @@ use parry3d::query::{DefaultQueryDispatcher, PersistentQueryDispatcher};
 use parry3d::shape::{Shape, SharedShape};
 use rayon::prelude::*;
 
+use crate::error::CollisionError;
 use crate::narrow::in_contact;
 use crate::pair::Manifold;
-use crate::self_contact::{adjacent, triangle_pair_manifold};
+use crate::parts::mesh_triangle;
+use crate::self_contact::{adjacent, triangles_manifold};
+use crate::validate::{
+    check_bounds, check_mesh_buffers, check_object, check_prediction, points_box,
+};
 
 /// A pair `(i, j)`, `i < j`, of objects with at least one contact point, and its manifolds.
 pub type TruthPair = (usize, usize, Vec<Manifold>);
@@ -42,12 +47,12 @@ pub fn pair(
 
 /// `true` for a finite prediction distance `>= 0`.
 fn valid_prediction(prediction: f32) -> bool {
-    prediction.is_finite() && prediction >= 0.0
+    check_prediction(prediction).is_ok()
 }
 
 /// `true` when the world would accept `shape` at `pose` with this prediction distance.
 fn valid_object((pose, shape): &(Isometry3<f32>, SharedShape), prediction: f32) -> bool {
-    crate::validate::check_object(&**shape, pose, prediction).is_ok()
+    check_object(&**shape, pose, prediction).is_ok()
 }
 
 /// The parry call of [`pair`], on objects already checked.
@@ -119,13 +124,24 @@ pub fn par_contact_pairs(
 /// relative pose composed as parry's own mesh-mesh routine does (it walks the larger mesh
 /// first; with pseudo-normals the manifold is not continuous in the pose, so even the last bit
 /// of the pose matters).
+///
+/// # Errors
+/// What the world would refuse, on which parry can panic (its GJK asserts finite bounds):
+/// [`CollisionError::InvalidPrediction`] for a `prediction` that is negative, NaN or
+/// infinite, and the error of [`check_pose`](crate::check_pose),
+/// [`check_shape`](crate::check_shape) or [`check_bounds`](crate::check_bounds) for a mesh
+/// with NaN or out-of-range vertices, or reaching beyond
+/// ±[`MAX_COORDINATE`](crate::MAX_COORDINATE) at its pose grown by `prediction`.
 pub fn mesh_mesh_triangle_pairs(
     mesh1: &parry3d::shape::TriMesh,
     pose1: &Isometry3<f32>,
     mesh2: &parry3d::shape::TriMesh,
     pose2: &Isometry3<f32>,
     prediction: f32,
-) -> Vec<(u32, u32, f32)> {
+) -> Result<Vec<(u32, u32, f32)>, CollisionError> {
+    check_prediction(prediction)?;
+    check_object(mesh1, pose1, prediction)?;
+    check_object(mesh2, pose2, prediction)?;
     let pos12 = pose1.inv_mul(pose2);
     let size = |m: &parry3d::shape::TriMesh| m.bvh().root_aabb().half_extents().norm_squared();
     let pos12 = if size(mesh1) < size(mesh2) {
@@ -158,16 +174,27 @@ pub fn mesh_mesh_triangle_pairs(
             }
         }
     }
-    out
+    Ok(out)
 }
 
 /// Every pair of triangles `t1 < t2` of one mesh that share no vertex and whose convex-convex
 /// manifold has a point within `prediction`: all `n²/2` pairs, fresh.
+///
+/// # Errors
+/// What the world would refuse for a deformable mesh, on which parry can panic (its GJK
+/// asserts finite bounds): [`CollisionError::InvalidPrediction`] for a `prediction` that is
+/// negative, NaN or infinite; [`CollisionError::DegenerateShape`] (no triangle, an index out
+/// of range, a NaN, infinite or out-of-range vertex) or [`CollisionError::TooMany`] from the
+/// buffers' check; [`CollisionError::OutOfRange`] when the vertices' box grown by
+/// `prediction` reaches beyond ±[`MAX_COORDINATE`](crate::MAX_COORDINATE).
 pub fn self_contacts(
     vertices: &[Point3<f32>],
     indices: &[[u32; 3]],
     prediction: f32,
-) -> Vec<(u32, u32, Manifold)> {
+) -> Result<Vec<(u32, u32, Manifold)>, CollisionError> {
+    check_prediction(prediction)?;
+    check_mesh_buffers(vertices, indices)?;
+    check_bounds(&points_box(vertices, prediction))?;
     let n = indices.len() as u32;
     let mut out = Vec::new();
     for t1 in 0..n {
@@ -175,12 +202,18 @@ pub fn self_contacts(
             if adjacent(&indices[t1 as usize], &indices[t2 as usize]) {
                 continue;
             }
-            if let Some(m) = triangle_pair_manifold(vertices, indices, t1, t2, prediction) {
+            let (Some(a), Some(b)) = (
+                mesh_triangle(vertices, indices, t1),
+                mesh_triangle(vertices, indices, t2),
+            ) else {
+                continue;
+            };
+            if let Some(m) = triangles_manifold(&a, &b, t1, t2, prediction) {
                 out.push((t1, t2, m));
             }
         }
     }
-    out
+    Ok(out)
 }
 
 /// `true` when `shape` is something parry's dispatcher handles as one convex piece.

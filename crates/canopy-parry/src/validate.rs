@@ -26,6 +26,26 @@ pub fn check_bounds(aabb: &Aabb) -> Result<(), CollisionError> {
     }
 }
 
+/// Checks a prediction distance: finite and `>= 0` (else
+/// [`CollisionError::InvalidPrediction`]), as `CollisionWorld::update` does.
+pub(crate) fn check_prediction(prediction: f32) -> Result<(), CollisionError> {
+    if prediction.is_finite() && prediction >= 0.0 {
+        Ok(())
+    } else {
+        Err(CollisionError::InvalidPrediction(prediction))
+    }
+}
+
+/// The box of `points` grown by `margin`, for [`check_bounds`] (not valid when a coordinate
+/// is NaN, or when there is no point).
+pub(crate) fn points_box(points: &[Point3<f32>], margin: f32) -> Aabb {
+    // `merge` keeps the other side of a NaN comparison: NaN points are refused first.
+    if points.iter().any(|p| !finite_point(p)) {
+        return Aabb::EMPTY;
+    }
+    Aabb::from_points(points).loosened(margin)
+}
+
 /// The box of `shape` placed at `pose`, grown by `margin`: the box the world keeps for a
 /// shape object and checks with [`check_bounds`].
 pub(crate) fn shape_aabb(shape: &dyn Shape, pose: &Isometry3<f32>, margin: f32) -> Aabb {

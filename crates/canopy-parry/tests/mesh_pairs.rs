@@ -51,7 +51,8 @@ fn check(seed: u64, prediction: f32, fix_edges: bool) -> usize {
         })
         .collect();
     mine.sort_by_key(|m| (m.0, m.1));
-    let truth = brute_force::mesh_mesh_triangle_pairs(&m1, &pose1, &m2, &pose2, prediction);
+    let truth = brute_force::mesh_mesh_triangle_pairs(&m1, &pose1, &m2, &pose2, prediction)
+        .expect("the world accepted both meshes");
     let keys = |v: &[(u32, u32, f32)]| v.iter().map(|m| (m.0, m.1)).collect::<Vec<_>>();
     assert_eq!(
         keys(&mine),
@@ -93,5 +94,69 @@ proptest! {
         fix_edges in any::<bool>(),
     ) {
         check(seed, prediction, fix_edges);
+    }
+}
+
+/// A coordinate from ordinary to extreme (see `self_collision.rs`).
+fn coordinate() -> impl Strategy<Value = f32> {
+    let edge = canopy_parry::MAX_COORDINATE;
+    prop_oneof![
+        6 => -2.0f32..2.0,
+        1 => Just(f32::NAN),
+        1 => prop_oneof![Just(f32::INFINITY), Just(f32::NEG_INFINITY)],
+        1 => prop_oneof![Just(f32::MAX), Just(-f32::MAX), Just(3.0e38f32)],
+        1 => prop_oneof![Just(edge), Just(-edge), Just(edge * 1.5), Just(edge - 1.0)],
+    ]
+}
+
+fn extreme_mesh(vertices: &[[f32; 3]], indices: &[[u32; 3]]) -> Option<TriMesh> {
+    let v = vertices.iter().map(|&p| p.into()).collect();
+    let n = vertices.len() as u32;
+    let i = indices.iter().map(|t| t.map(|k| k % n)).collect();
+    TriMesh::new(v, i).ok()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Bad input gets an error, never a panic (parry's GJK asserted finite bounds on a
+    /// vertex at `f32::MAX`), and exactly where the world refuses the same two meshes at
+    /// these poses and this prediction (`insert`, then `update`).
+    #[test]
+    fn mesh_mesh_triangle_pairs_refuse_what_the_world_refuses(
+        v1 in prop::collection::vec(prop::array::uniform3(coordinate()), 3..7),
+        i1 in prop::collection::vec(prop::array::uniform3(0u32..7), 1..4),
+        v2 in prop::collection::vec(prop::array::uniform3(coordinate()), 3..7),
+        i2 in prop::collection::vec(prop::array::uniform3(0u32..7), 1..4),
+        t in prop::array::uniform3(coordinate()),
+        r in prop::array::uniform4(prop_oneof![4 => -1.0f32..1.0, 1 => Just(f32::NAN)]),
+        prediction in prop_oneof![
+            4 => 0.0f32..0.5,
+            1 => Just(-1.0f32),
+            1 => Just(f32::NAN),
+            1 => Just(f32::INFINITY),
+            1 => Just(1.0e30f32),
+        ],
+    ) {
+        use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+        let (Some(m1), Some(m2)) = (extreme_mesh(&v1, &i1), extreme_mesh(&v2, &i2)) else {
+            return Ok(());
+        };
+        let q = Quaternion::new(r[0], r[1], r[2], r[3]);
+        // Mostly unit rotations; a NaN one stays NaN (`check_pose` refuses it).
+        let rotation = if q.norm() > 1e-3 || q.norm().is_nan() {
+            UnitQuaternion::new_unchecked(q / q.norm())
+        } else {
+            UnitQuaternion::identity()
+        };
+        let pose2 = Isometry3::from_parts(Translation3::new(t[0], t[1], t[2]), rotation);
+        let pose1 = Isometry3::identity();
+        let truth = brute_force::mesh_mesh_triangle_pairs(&m1, &pose1, &m2, &pose2, prediction);
+        let mut world = CollisionWorld::new();
+        let accepted = world
+            .insert(SharedShape::new(m1), pose1, ())
+            .and_then(|_| world.insert(SharedShape::new(m2), pose2, ()))
+            .and_then(|_| world.update(prediction));
+        prop_assert_eq!(truth.is_ok(), accepted.is_ok(), "{:?} against {:?}", truth.err(), accepted);
     }
 }

@@ -34,6 +34,7 @@ fn run(seed: u64, n: usize, steps: usize, prediction: f32, motion: f32) -> usize
             })
             .collect();
         let truth: Vec<(u32, u32, f32)> = brute_force::self_contacts(&v, &i, prediction)
+            .expect("the world accepted the mesh")
             .iter()
             .map(|(a, b, m)| {
                 (
@@ -72,5 +73,71 @@ proptest! {
         motion in 0.0f32..0.5,
     ) {
         run(seed, n, steps, prediction, motion);
+    }
+}
+
+/// A coordinate from ordinary to extreme: NaN, the infinities, `f32::MAX`, values either
+/// side of `MAX_COORDINATE`.
+fn coordinate() -> impl Strategy<Value = f32> {
+    let edge = canopy_parry::MAX_COORDINATE;
+    prop_oneof![
+        6 => -2.0f32..2.0,
+        1 => Just(f32::NAN),
+        1 => prop_oneof![Just(f32::INFINITY), Just(f32::NEG_INFINITY)],
+        1 => prop_oneof![Just(f32::MAX), Just(-f32::MAX), Just(3.0e38f32)],
+        1 => prop_oneof![Just(edge), Just(-edge), Just(edge * 1.5), Just(edge - 1.0)],
+    ]
+}
+
+/// A prediction distance, valid or not.
+fn prediction() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        4 => 0.0f32..0.5,
+        1 => Just(-1.0f32),
+        1 => Just(f32::NAN),
+        1 => Just(f32::INFINITY),
+        1 => Just(1.0e30f32),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Bad input gets an error, never a panic (parry's GJK asserted finite bounds on a
+    /// vertex at `f32::MAX`), and exactly where the world refuses the same mesh and
+    /// prediction (`insert_deformable`, then `update`); where both accept it, the same
+    /// self-contacts, and `triangle_pair_manifold` on each pair found gives its manifold.
+    #[test]
+    fn self_contacts_refuse_what_the_world_refuses(
+        vertices in prop::collection::vec(prop::array::uniform3(coordinate()), 3..9),
+        indices in prop::collection::vec(prop::array::uniform3(0u32..10), 0..6),
+        prediction in prediction(),
+    ) {
+        let v: Vec<nalgebra::Point3<f32>> = vertices.iter().map(|&p| p.into()).collect();
+        let truth = brute_force::self_contacts(&v, &indices, prediction);
+        let mut world = CollisionWorld::new();
+        let accepted = world
+            .insert_deformable(v.clone(), indices.clone(), Isometry3::identity(), ())
+            .and_then(|_| world.update(prediction));
+        prop_assert_eq!(truth.is_ok(), accepted.is_ok(), "{:?} against {:?}", truth.as_ref().err(), accepted);
+        if let Ok(truth) = truth {
+            let mine: Vec<(u32, u32)> = world
+                .self_contacts()
+                .iter()
+                .map(|c| (c.triangle1, c.triangle2))
+                .collect();
+            let keys: Vec<(u32, u32)> = truth.iter().map(|c| (c.0, c.1)).collect();
+            prop_assert_eq!(&mine, &keys);
+            for (t1, t2, _) in &truth {
+                let m = canopy_parry::triangle_pair_manifold(&v, &indices, *t1, *t2, prediction);
+                prop_assert!(m.is_some());
+            }
+        }
+        // Any pair of any triangles, valid or not: an answer, no panic.
+        for t1 in 0..indices.len() as u32 + 1 {
+            for t2 in 0..indices.len() as u32 + 1 {
+                let _ = canopy_parry::triangle_pair_manifold(&v, &indices, t1, t2, prediction);
+            }
+        }
     }
 }
