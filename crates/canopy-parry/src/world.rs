@@ -20,7 +20,7 @@ use crate::pair::ContactPair;
 use crate::parts::{build_part_tree, composite_part_aabbs, Parts};
 use crate::self_contact::{self_contacts, SelfContact};
 use crate::stats::UpdateStats;
-use crate::validate::{check_bounds, check_pose, check_shape, shape_aabb};
+use crate::validate::{check_bounds, check_pose, check_prediction, check_shape, shape_aabb};
 
 const NONE: u32 = u32::MAX;
 
@@ -501,9 +501,7 @@ impl<T> CollisionWorld<T> {
     /// [`CollisionError::OutOfRange`] and the next one recomputes every box and rebuilds the
     /// tree rather than trust a half-applied update.)
     pub fn update(&mut self, prediction: f32) -> Result<(), CollisionError> {
-        if !(prediction.is_finite() && prediction >= 0.0) {
-            return Err(CollisionError::InvalidPrediction(prediction));
-        }
+        check_prediction(prediction)?;
         let start = Instant::now();
         let all = self.prediction != Some(prediction);
         let changes = self.pending_changes(prediction, all)?;
