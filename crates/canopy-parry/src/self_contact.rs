@@ -34,10 +34,10 @@ pub fn adjacent(a: &[u32; 3], b: &[u32; 3]) -> bool {
 
 /// The manifold of triangles `t1` and `t2` of a mesh (both in the mesh's frame), or `None`
 /// when it has no point within `prediction`. `None` also, without calling parry (whose GJK
-/// asserts finite bounds), for what the collision world would refuse in these two triangles: a
-/// triangle index or a vertex index out of range, a `prediction` that is negative, NaN or infinite, a vertex with
-/// a NaN or infinite coordinate, or the two triangles' box grown by `prediction` reaching
-/// beyond ±[`MAX_COORDINATE`](crate::MAX_COORDINATE).
+/// asserts finite bounds), for what the collision world would refuse in these two triangles:
+/// a triangle index or a vertex index out of range, a `prediction` that is negative, NaN or
+/// infinite, a vertex with a NaN or infinite coordinate, or the two triangles' box grown by
+/// `prediction` reaching beyond ±[`MAX_COORDINATE`](crate::MAX_COORDINATE).
 ///
 /// ```
 /// use canopy_parry::triangle_pair_manifold;

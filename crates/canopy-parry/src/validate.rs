@@ -26,8 +26,8 @@ pub fn check_bounds(aabb: &Aabb) -> Result<(), CollisionError> {
     }
 }
 
-/// Checks a prediction distance: finite and `>= 0` (else
-/// [`CollisionError::InvalidPrediction`]), as `CollisionWorld::update` does.
+/// Checks a prediction distance: finite and `>= 0`, else
+/// [`CollisionError::InvalidPrediction`] (`CollisionWorld::update` and `brute_force`).
 pub(crate) fn check_prediction(prediction: f32) -> Result<(), CollisionError> {
     if prediction.is_finite() && prediction >= 0.0 {
         Ok(())
@@ -37,7 +37,7 @@ pub(crate) fn check_prediction(prediction: f32) -> Result<(), CollisionError> {
 }
 
 /// The box of `points` grown by `margin`, for [`check_bounds`] (not valid when a coordinate
-/// is NaN, or when there is no point).
+/// is NaN or infinite, or when there is no point).
 pub(crate) fn points_box(points: &[Point3<f32>], margin: f32) -> Aabb {
     // `merge` keeps the other side of a NaN comparison: NaN points are refused first.
     if points.iter().any(|p| !finite_point(p)) {
