@@ -24,7 +24,7 @@ pub type TruthPair = (usize, usize, Vec<Manifold>);
 /// `prediction` that is negative, NaN or infinite, and for an object the world would refuse
 /// at this prediction distance: a pose that [`check_pose`](crate::check_pose) refuses, a
 /// shape that [`check_shape`](crate::check_shape) refuses, or a box (in the shape's own
-/// frame, or at its pose grown by `prediction`) that [`check_bounds`](crate::check_bounds)
+/// frame, or at its pose grown by `prediction`) that [`check_bounds`]
 /// refuses, i.e. one reaching beyond ±[`MAX_COORDINATE`](crate::MAX_COORDINATE). Parry
 /// panics on some of these: a negative prediction against a mesh, a NaN rotation, a convex
 /// hull without faces, coordinates near `f32::MAX`.
@@ -129,7 +129,7 @@ pub fn par_contact_pairs(
 /// What the world would refuse, on which parry can panic (its GJK asserts finite bounds):
 /// [`CollisionError::InvalidPrediction`] for a `prediction` that is negative, NaN or
 /// infinite, and the error of [`check_pose`](crate::check_pose),
-/// [`check_shape`](crate::check_shape) or [`check_bounds`](crate::check_bounds) for a mesh
+/// [`check_shape`](crate::check_shape) or [`check_bounds`] for a mesh
 /// with NaN or out-of-range vertices, or reaching beyond
 /// ±[`MAX_COORDINATE`](crate::MAX_COORDINATE) at its pose grown by `prediction`.
 pub fn mesh_mesh_triangle_pairs(
