@@ -32,11 +32,11 @@ use crate::config::{CanopyBroadPhaseConfig, ConfigError};
 use crate::filter::{FilterData, Mobility};
 use crate::pair_set::{unkey, Edge, PairSet};
 use crate::proxy::{Loc, Proxy};
-use crate::proxy_tree::{ProxyTree, DEAD};
+use crate::proxy_tree::{ProxyTree, DEAD, MOVING_LEAF_SIZE};
 use crate::queries::{QueryMirror, QueryOverlay};
 use crate::shape_box::Written;
 use crate::stats::BroadPhaseStats;
-use canopy_core::{Aabb, PairMarks};
+use canopy_core::{Aabb, BuildOptions, PairMarks};
 use rapier3d::prelude::*;
 
 /// Sets the bit of each handle's index of `modified` in `bits`, and its generation in
@@ -1788,18 +1788,24 @@ impl BroadPhase for CanopyBroadPhase {
         // 3. Trees.
         let policy = self.config.rebuild;
         for m in Mobility::ALL {
-            let builder = if m == Mobility::Fixed {
-                policy.fixed_builder
+            let build = if m == Mobility::Fixed {
+                BuildOptions {
+                    builder: policy.fixed_builder,
+                    ..Default::default()
+                }
             } else {
-                policy.moving_builder
+                BuildOptions {
+                    builder: policy.moving_builder,
+                    max_leaf_size: MOVING_LEAF_SIZE,
+                    ..Default::default()
+                }
+            };
+            let build = BuildOptions {
+                parallel: self.config.parallel,
+                ..build
             };
             let rebuilds = self.trees[m as usize].rebuilds;
-            self.trees[m as usize].maintain(
-                &mut self.proxies,
-                &policy,
-                builder,
-                self.config.parallel,
-            );
+            self.trees[m as usize].maintain(&mut self.proxies, &policy, build);
             if self.trees[m as usize].rebuilds != rebuilds {
                 // The pending proxies are members now.
                 self.moved_members[m as usize] |= self.moved_pending[m as usize];
