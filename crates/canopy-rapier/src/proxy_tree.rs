@@ -24,8 +24,11 @@ const SCANNED_PENDING: usize = 4;
 /// B 0.989 to 1.005 that hour): `spawn_storm` 0.964, 0.963, 0.971, 0.938, 0.988, `teleport`
 /// 0.924, 0.922, `pyramid` 0.975, `many_pyramids` 0.979, `boxes` 0.991, `balls` 0.998,
 /// `keva_tower` 1.010, 1.004, `many_kinematics` 1.009; 6 and 12 gave `spawn_storm` 0.964 and
-/// 0.968, 16 gave 1.008. (Stop 14 had measured 8 at 0.969 on `spawn_storm`, within that
-/// tool's noise then.)
+/// 0.968, 16 gave 1.008; 8 for the fixed tree as well changed nothing (`many_static`). With
+/// `tools/ab` (old / new, 3 to 5 runs): `spawn_storm` 1.022, `teleport` 1.024, `balls` 1.028,
+/// `many_kinematics` 1.102, `boxes` 1.007, `keva_tower` 0.999, `many_pyramids` 1.004 and
+/// 0.998, `pyramid` 1.006 and 0.988. (Stop 14 had measured 8 at 0.969 on `spawn_storm`,
+/// within that tool's noise then.)
 pub(crate) const MOVING_LEAF_SIZE: u32 = 8;
 
 /// Marks a slot whose proxy has left the tree.
