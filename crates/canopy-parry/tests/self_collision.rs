@@ -76,30 +76,6 @@ proptest! {
     }
 }
 
-/// A coordinate from ordinary to extreme: NaN, the infinities, `f32::MAX`, values either
-/// side of `MAX_COORDINATE`.
-fn coordinate() -> impl Strategy<Value = f32> {
-    let edge = canopy_parry::MAX_COORDINATE;
-    prop_oneof![
-        6 => -2.0f32..2.0,
-        1 => Just(f32::NAN),
-        1 => prop_oneof![Just(f32::INFINITY), Just(f32::NEG_INFINITY)],
-        1 => prop_oneof![Just(f32::MAX), Just(-f32::MAX), Just(3.0e38f32)],
-        1 => prop_oneof![Just(edge), Just(-edge), Just(edge * 1.5), Just(edge - 1.0)],
-    ]
-}
-
-/// A prediction distance, valid or not.
-fn prediction() -> impl Strategy<Value = f32> {
-    prop_oneof![
-        4 => 0.0f32..0.5,
-        1 => Just(-1.0f32),
-        1 => Just(f32::NAN),
-        1 => Just(f32::INFINITY),
-        1 => Just(1.0e30f32),
-    ]
-}
-
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]
 
@@ -109,9 +85,9 @@ proptest! {
     /// self-contacts, and `triangle_pair_manifold` on each pair found gives its manifold.
     #[test]
     fn self_contacts_refuse_what_the_world_refuses(
-        vertices in prop::collection::vec(prop::array::uniform3(coordinate()), 3..9),
+        vertices in prop::collection::vec(prop::array::uniform3(extreme_coordinate()), 3..9),
         indices in prop::collection::vec(prop::array::uniform3(0u32..10), 0..6),
-        prediction in prediction(),
+        prediction in any_prediction(),
     ) {
         let v: Vec<nalgebra::Point3<f32>> = vertices.iter().map(|&p| p.into()).collect();
         let truth = brute_force::self_contacts(&v, &indices, prediction);

@@ -1,11 +1,37 @@
-//! Shared test helpers: a seeded generator of random shapes, poses and meshes, and the
-//! comparison of a world's contacts with brute-force parry.
+//! Shared test helpers: a seeded generator of random shapes, poses and meshes, the
+//! comparison of a world's contacts with brute-force parry, and proptest strategies for bad
+//! input.
 
 #![allow(dead_code)]
 
 use canopy_parry::{brute_force, CollisionWorld, ObjectHandle};
 use nalgebra::{Isometry3, Point3, Vector3};
 use parry3d::shape::{SharedShape, TriMesh};
+use proptest::prelude::*;
+
+/// A coordinate from ordinary to extreme, for tests of bad input: NaN, the infinities,
+/// `f32::MAX`, values either side of `MAX_COORDINATE`.
+pub fn extreme_coordinate() -> impl Strategy<Value = f32> {
+    let edge = canopy_parry::MAX_COORDINATE;
+    prop_oneof![
+        6 => -2.0f32..2.0,
+        1 => Just(f32::NAN),
+        1 => prop_oneof![Just(f32::INFINITY), Just(f32::NEG_INFINITY)],
+        1 => prop_oneof![Just(f32::MAX), Just(-f32::MAX), Just(3.0e38f32)],
+        1 => prop_oneof![Just(edge), Just(-edge), Just(edge * 1.5), Just(edge - 1.0)],
+    ]
+}
+
+/// A prediction distance, valid or not (negative, NaN, infinite, far too large).
+pub fn any_prediction() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        4 => 0.0f32..0.5,
+        1 => Just(-1.0f32),
+        1 => Just(f32::NAN),
+        1 => Just(f32::INFINITY),
+        1 => Just(1.0e30f32),
+    ]
+}
 
 /// SplitMix64: small, seeded, reproducible.
 pub struct SeedRng(u64);
