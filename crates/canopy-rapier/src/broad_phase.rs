@@ -1788,21 +1788,16 @@ impl BroadPhase for CanopyBroadPhase {
         // 3. Trees.
         let policy = self.config.rebuild;
         for m in Mobility::ALL {
-            let build = if m == Mobility::Fixed {
-                BuildOptions {
-                    builder: policy.fixed_builder,
-                    ..Default::default()
-                }
+            let (builder, max_leaf_size) = if m == Mobility::Fixed {
+                (policy.fixed_builder, BuildOptions::default().max_leaf_size)
             } else {
-                BuildOptions {
-                    builder: policy.moving_builder,
-                    max_leaf_size: MOVING_LEAF_SIZE,
-                    ..Default::default()
-                }
+                (policy.moving_builder, MOVING_LEAF_SIZE)
             };
             let build = BuildOptions {
+                builder,
+                max_leaf_size,
                 parallel: self.config.parallel,
-                ..build
+                ..Default::default()
             };
             let rebuilds = self.trees[m as usize].rebuilds;
             self.trees[m as usize].maintain(&mut self.proxies, &policy, build);
