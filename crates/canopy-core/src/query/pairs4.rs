@@ -11,11 +11,12 @@
 //! boxes against four (a node's lanes against a rotation of the other's). Of the overlapping
 //! lane pairs, two interior lanes push a task, two one-primitive leaves are reported, a leaf
 //! against an interior lane becomes a query of each of the leaf's primitives down that
-//! subtree, and two leaves compare their primitives. In a tree larger than the caches the
-//! tasks pass through a small window that prefetches their nodes a few tasks ahead. The
-//! primitive tests take no branch on their outcome (nor on the marks): every pair tested is
-//! written to a small buffer that advances only when the boxes overlap and a side is marked,
-//! and the buffer goes to the callback when full and at the end of the walk.
+//! subtree, and two leaves compare their primitives (each leaf first cut down to the primitives
+//! that overlap the other leaf's box). In a tree larger than the caches the tasks pass through
+//! a small window that prefetches their nodes a few tasks ahead. The primitive tests take no
+//! branch on their outcome (nor on the marks): every pair tested is written to a small buffer
+//! that advances only when the boxes overlap and a side is marked, and the buffer goes to the
+//! callback when full and at the end of the walk.
 
 use super::ray::{Node4, Ray4, INTERIOR};
 use super::{prefetch, prefetch_node};
@@ -113,6 +114,10 @@ fn lane_box(n: &Node4, lane: usize) -> (F4, F4) {
 
 /// Pairs a walk gathers before handing them to its callback (see [`Walk::emit`]).
 const PAIR_BUFFER: usize = 64;
+
+/// Leaves of at most this many primitives are cut down to the primitives that overlap the
+/// other leaf's box before their pairs are tested (`Walk::leaf_leaf`).
+const FILTERED_LEAF: usize = 16;
 
 /// Number of tasks taken off the stack ahead of their turn, so that the lines they read are
 /// on their way while the tasks before them run.
@@ -433,6 +438,41 @@ impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
         };
         let (ra, sa) = prims(na, i);
         let (rb, sb) = prims(nb, j);
+        if !sa && !sb && ra.len() <= FILTERED_LEAF && rb.len() <= FILTERED_LEAF {
+            // Two leaves of several primitives: only a primitive that overlaps the other
+            // leaf's box can overlap one of its primitives (the leaf's box holds them all).
+            // Each side is cut down to those first (kept in slot order, so the pairs come in
+            // the same order as from the full loop), then the pairs of what is left.
+            let (blo, bhi) = lane_box(nb, j);
+            let (alo, ahi) = lane_box(na, i);
+            let mut keep_a = [0u32; FILTERED_LEAF];
+            let mut keep_b = [0u32; FILTERED_LEAF];
+            let (mut ka, mut kb) = (0, 0);
+            for s in ra {
+                let (plo, phi) = prim_box(&t.prim_bounds[s]);
+                keep_a[ka] = s as u32;
+                ka += overlap(plo, phi, blo, bhi) as usize;
+            }
+            for u in rb {
+                let (ulo, uhi) = prim_box(&t.prim_bounds[u]);
+                keep_b[kb] = u as u32;
+                kb += overlap(ulo, uhi, alo, ahi) as usize;
+            }
+            for &s in &keep_a[..ka] {
+                let s = s as usize;
+                let (plo, phi) = prim_box(&t.prim_bounds[s]);
+                let ms = M::ALL || marks.slot(s);
+                let ip = t.prim_indices[s];
+                for &u in &keep_b[..kb] {
+                    let u = u as usize;
+                    let with_mark = ms | marks.slot(u);
+                    let (ulo, uhi) = prim_box(&t.prim_bounds[u]);
+                    let hit = overlap(plo, phi, ulo, uhi) & with_mark;
+                    self.emit(ip, t.prim_indices[u], hit);
+                }
+            }
+            return;
+        }
         for s in ra {
             let ((plo, phi), ip) = get(na, i, sa, s);
             let ms = M::ALL || marked(sa, s, mi);
@@ -703,7 +743,8 @@ mod tests {
     fn both_modes_match_brute_force() {
         let mut r = rng(11);
         for builder in [Builder::BinnedSah, Builder::Lbvh] {
-            for leaf in [1, 3, 8] {
+            // 20: leaves too large for `leaf_leaf`'s filtered loop take the full one.
+            for leaf in [1, 3, 8, 20] {
                 for n in [1, 2, 5, 17, 300, 1500] {
                     let b = boxes(n, (n as f32).cbrt() * 2.0, 1.0, &mut r);
                     let options = BuildOptions {
