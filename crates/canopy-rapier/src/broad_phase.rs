@@ -345,8 +345,14 @@ pub(crate) fn prefetch<T>(p: *const T) {
 }
 
 /// With fewer moved proxies than one tree member in this many, new pairs are found by one
-/// query per moved proxy instead of marked pair walks.
-const SPARSE_MOVES: usize = 8;
+/// query per moved proxy instead of marked pair walks. 8 until the walks tested two leaves'
+/// primitives only after cutting each down to those that overlap the other leaf's box; since
+/// then the queries win up to more moved proxies (`spawn_storm`'s grid landing on its pile,
+/// 694 to 1,525 of 4,000 moved: the walks and their bookkeeping took 0.9 to 1.1 ms). `tools/ab`
+/// old / new, 4 against 8: `spawn_storm` 1.017 (9 runs), `many_kinematics` 1.069, `balls`
+/// 1.002, `teleport` 1.001, the others within noise; 3 gave 1.012 and 1.004, 2 gave 1.008 and
+/// `balls` 0.987.
+const SPARSE_MOVES: usize = 4;
 
 /// A broadphase for Rapier built on canopy-core BVHs: fat boxes, one tree per mobility
 /// (fixed, kinematic, dynamic), a move buffer, per-proxy pair lists and pair filtering at the

@@ -703,7 +703,7 @@ fn a_tree_moving_together_with_nothing_to_pair_with_keeps_the_contract() {
     run(&mut sim, &mut bp, 40);
     assert!(bp.violations.is_empty(), "{:#?}", bp.violations);
     assert!(bp.checked_pairs > 0);
-    // The grid did leave its boxes together (one proxy in eight or more of the 301 before the
+    // The grid did leave its boxes together (one proxy in four or more of the 301 before the
     // dynamic ball): those updates took the walks.
     assert!(most_moved >= 100, "at most {most_moved} moved at once");
 }
