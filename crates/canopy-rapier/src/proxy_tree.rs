@@ -28,8 +28,16 @@ const SCANNED_PENDING: usize = 4;
 /// `tools/ab` (old / new, 3 to 5 runs): `spawn_storm` 1.022, `teleport` 1.024, `balls` 1.028,
 /// `many_kinematics` 1.102, `boxes` 1.007, `keva_tower` 0.999, `many_pyramids` 1.004 and
 /// 0.998, `pyramid` 1.006 and 0.988. (Stop 14 had measured 8 at 0.969 on `spawn_storm`,
-/// within that tool's noise then.)
-pub(crate) const MOVING_LEAF_SIZE: u32 = 8;
+/// within that tool's noise then.) 16 since the pair walks cut two leaves down to the
+/// primitives that overlap the other leaf's box before testing their pairs (which makes
+/// large leaves cheap to pair; leaves of up to 16 take that path): `tools/ab` old / new, 16
+/// against 8, `spawn_storm` 1.009 (9 runs; 1.019 in 5 before), `balls` 1.016, `teleport`
+/// 1.027, `many_kinematics` 1.073, `many_pyramids` 1.031, `pyramid` 1.026, `keva_tower`
+/// 1.015, `boxes` 1.013; 10, 12 and 24 gave `spawn_storm` 0.995, 1.010 and 1.022, `balls`
+/// 1.004, 0.996 and 0.988, `teleport` 1.006, 1.010 and 1.009. More instructions (callgrind,
+/// 100 steps: `spawn_storm` 264.5M -> 279.7M, `balls` 241.6M -> 245.6M) in less time: fewer
+/// node visits, whose branches mispredict, for more branch-free box tests.
+pub(crate) const MOVING_LEAF_SIZE: u32 = 16;
 
 /// Marks a slot whose proxy has left the tree.
 pub(crate) const DEAD: u32 = u32::MAX;
