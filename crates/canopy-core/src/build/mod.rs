@@ -14,6 +14,7 @@ pub use radix_sort::radix_sort_pairs;
 use crate::aabb::Aabb;
 use crate::bvh::{Bvh, Node, PrimBounds};
 use crate::error::BvhError;
+use f4::F4;
 
 /// Which builder [`Bvh::build`] runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -181,13 +182,26 @@ impl Bounds {
         self
     }
 
+    /// The bounds of `prims`, as `grow` over each in turn would give them (bit for bit: the
+    /// four-lane `min`/`max` keep the accumulated value on ties and against NaNs, as `grow`'s
+    /// comparisons do), four lanes at a time: the lower corners in lanes 0..3 of one vector,
+    /// the upper corners in lanes 1..4 of another (floats 0..4 and 2..6 of each box).
     #[inline]
     pub fn of_prims(prims: &[PrimBounds]) -> Bounds {
-        let mut b = Bounds::EMPTY;
+        let mut lower = F4::splat(f32::INFINITY);
+        let mut upper = F4::splat(f32::NEG_INFINITY);
         for p in prims {
-            b.grow(&p.min, &p.max);
+            let f = p.floats();
+            let (lo, hi) = (&f[0..4], &f[2..6]);
+            // `x.min(acc)` is `x < acc ? x : acc`: `grow`'s `if x < acc { acc = x }`.
+            lower = F4::load4(lo.try_into().unwrap_or(&[0.0; 4])).min(lower);
+            upper = F4::load4(hi.try_into().unwrap_or(&[0.0; 4])).max(upper);
         }
-        b
+        let (l, u) = (lower.to_array(), upper.to_array());
+        Bounds {
+            min: [l[0], l[1], l[2]],
+            max: [u[1], u[2], u[3]],
+        }
     }
 }
 
@@ -208,6 +222,44 @@ pub(crate) fn append_subtree(out: &mut Vec<Node>, mut right: Vec<Node>) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    /// A coordinate drawn from few values, so that ties, signed zeros, infinities and NaNs
+    /// are common.
+    fn coordinate() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            Just(0.0f32),
+            Just(-0.0f32),
+            Just(1.0f32),
+            Just(-1.0f32),
+            Just(f32::INFINITY),
+            Just(f32::NEG_INFINITY),
+            Just(f32::NAN),
+            -1e30f32..1e30f32,
+        ]
+    }
+
+    proptest! {
+        /// `of_prims` is `grow` over the boxes in turn, to the bit.
+        #[test]
+        fn bounds_of_prims_match_growing_one_by_one(
+            prims in prop::collection::vec(
+                (prop::array::uniform3(coordinate()), prop::array::uniform3(coordinate())),
+                0..40,
+            )
+        ) {
+            let prims: Vec<PrimBounds> =
+                prims.into_iter().map(|(min, max)| PrimBounds { min, max }).collect();
+            let mut grown = Bounds::EMPTY;
+            for p in &prims {
+                grown.grow(&p.min, &p.max);
+            }
+            let b = Bounds::of_prims(&prims);
+            let bits = |v: [f32; 3]| v.map(f32::to_bits);
+            prop_assert_eq!(bits(b.min), bits(grown.min));
+            prop_assert_eq!(bits(b.max), bits(grown.max));
+        }
+    }
 
     /// The largest count whose node indices (up to `2n - 2`) fit in a `u32` is accepted; one
     /// more primitive is refused rather than built with wrapped indices.
