@@ -1515,7 +1515,9 @@ impl CanopyBroadPhase {
         if waiting.is_empty() {
             return;
         }
-        let tights = &self.tights;
+        // A slice, not the `Vec`: its pointer and length stay in registers through the loop
+        // (read through the `Vec`, they were loaded again for every pair).
+        let tights: &[Aabb] = &self.tights;
         let proxies = self.proxies.len().max(1);
         let per_proxy_reads = count + 2 * waiting.len() * count.min(proxies) / proxies;
         if waiting.len() <= per_proxy_reads {
