@@ -155,14 +155,36 @@ impl Bvh {
                     let lane = larger.trailing_zeros() as usize;
                     larger &= larger - 1;
                     let first = n.first[lane] as usize;
-                    for slot in first..first + n.meta[lane] as usize {
-                        if k == HITS {
-                            hits.iter().for_each(|&i| f(i));
+                    let slots = first..first + n.meta[lane] as usize;
+                    let (Some(boxes), Some(indices)) = (
+                        self.prim_bounds.get(slots.clone()),
+                        self.prim_indices.get(slots),
+                    ) else {
+                        continue;
+                    };
+                    if boxes.len() <= HITS {
+                        // Room for the whole leaf first: no check per primitive.
+                        if k + boxes.len() > HITS {
+                            hits[..k].iter().for_each(|&i| f(i));
                             k = 0;
                         }
-                        let (blo, bhi) = prim_box(&self.prim_bounds[slot]);
-                        hits[k] = self.prim_indices[slot];
-                        k += overlap(blo, bhi, q4.0, q4.1) as usize;
+                        for (b, &index) in boxes.iter().zip(indices) {
+                            let (blo, bhi) = prim_box(b);
+                            // `k` stays below `HITS` here: the modulo never changes it, only
+                            // spares the bounds check.
+                            hits[k % HITS] = index;
+                            k += overlap(blo, bhi, q4.0, q4.1) as usize;
+                        }
+                    } else {
+                        for (b, &index) in boxes.iter().zip(indices) {
+                            if k == HITS {
+                                hits.iter().for_each(|&i| f(i));
+                                k = 0;
+                            }
+                            let (blo, bhi) = prim_box(b);
+                            hits[k] = index;
+                            k += overlap(blo, bhi, q4.0, q4.1) as usize;
+                        }
                     }
                 }
             }
