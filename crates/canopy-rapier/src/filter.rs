@@ -62,6 +62,12 @@ impl FilterData {
             && self.active == collider.active_collision_types()
     }
 
+    /// The parent body's arena index, if there is a parent.
+    #[inline]
+    pub fn parent_index(&self) -> Option<u32> {
+        (self.parent != NO_PARENT).then_some(self.parent[0])
+    }
+
     /// `true` when the narrow phase could make contacts between the two colliders.
     #[inline]
     pub fn may_pair(&self, other: &FilterData) -> bool {

@@ -4,7 +4,8 @@
 //! `PhysicsPipeline::step` instead of Rapier's `BroadPhaseBvh`; the simulation is the same,
 //! the broadphase time is lower.
 //!
-//! Files: `broad_phase.rs` (the update), `proxy.rs` (per-collider state), `proxy_tree.rs` (one
+//! Files: `broad_phase.rs` (the update), `arena_ahead.rs` (its prefetching of colliders and
+//! bodies), `proxy.rs` (per-collider state), `proxy_tree.rs` (one
 //! tree per mobility), `pair_set.rs` (live pairs and per-proxy partner lists), `filter.rs`
 //! (pairs the narrow phase would discard), `config.rs`, `stats.rs`, and `queries/` (scene
 //! queries: ray, point and shape queries with Rapier's names, and Rapier's own
@@ -12,6 +13,7 @@
 
 #![deny(missing_docs)]
 
+mod arena_ahead;
 mod box_lanes;
 mod broad_phase;
 mod config;
