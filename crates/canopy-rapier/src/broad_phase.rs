@@ -1778,13 +1778,14 @@ impl BroadPhase for CanopyBroadPhase {
                 .extend(SetBits::new(&bits).map(|i| hints.get(i as usize).copied().unwrap_or(0)));
         }
         let shapes_mixed = self.shapes_mixed || !crate::shape_box::written_out_agrees();
-        let set_bytes = colliders
-            .len()
+        let set_bytes = (colliders.len())
             .saturating_mul(std::mem::size_of::<Collider>())
-            + bodies
-                .len()
-                .saturating_mul(std::mem::size_of::<RigidBody>());
-        let ahead = if modified_colliders.len() * DENSE_EXAMINE >= colliders.len()
+            .saturating_add(
+                bodies
+                    .len()
+                    .saturating_mul(std::mem::size_of::<RigidBody>()),
+            );
+        let ahead = if modified_colliders.len().saturating_mul(DENSE_EXAMINE) >= colliders.len()
             && set_bytes >= AHEAD_MIN_BYTES
         {
             ExamineAhead::learn(colliders, bodies, SetBits::new(&bits), |i| {
