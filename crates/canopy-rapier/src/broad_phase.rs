@@ -1778,7 +1778,8 @@ impl BroadPhase for CanopyBroadPhase {
                 .extend(SetBits::new(&bits).map(|i| hints.get(i as usize).copied().unwrap_or(0)));
         }
         let shapes_mixed = self.shapes_mixed || !crate::shape_box::written_out_agrees();
-        let set_bytes = (colliders.len())
+        let set_bytes = colliders
+            .len()
             .saturating_mul(std::mem::size_of::<Collider>())
             .saturating_add(
                 bodies
