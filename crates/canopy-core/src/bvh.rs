@@ -180,8 +180,6 @@ pub struct PrimBounds {
     pub max: [f32; 3],
 }
 
-const _: () = assert!(std::mem::size_of::<PrimBounds>() == 24);
-
 impl PrimBounds {
     #[inline]
     pub(crate) fn from_aabb(a: &Aabb) -> Self {
@@ -189,14 +187,6 @@ impl PrimBounds {
             min: a.min_array(),
             max: a.max_array(),
         }
-    }
-
-    /// The six floats, lower corner first.
-    #[inline(always)]
-    pub(crate) fn floats(&self) -> &[f32; 6] {
-        // SAFETY: `repr(C)` with two `[f32; 3]` fields of alignment 4: six consecutive `f32`
-        // and no padding (the size is checked above), which is the layout of `[f32; 6]`.
-        unsafe { &*(self as *const PrimBounds).cast::<[f32; 6]>() }
     }
 }
 

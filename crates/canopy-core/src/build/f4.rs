@@ -299,6 +299,7 @@ use crate::bvh::{Node, PrimBounds};
 
 const _: () = assert!(std::mem::size_of::<Aabb>() == 24);
 const _: () = assert!(std::mem::offset_of!(Aabb, max) == 12);
+const _: () = assert!(std::mem::size_of::<PrimBounds>() == 24);
 
 /// A box stored as six `f32` (`min` then `max`) as two vectors; lane 3 is junk (ignore it).
 #[inline(always)]

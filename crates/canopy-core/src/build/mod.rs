@@ -184,23 +184,21 @@ impl Bounds {
 
     /// The bounds of `prims`, as `grow` over each in turn would give them (bit for bit: the
     /// four-lane `min`/`max` keep the accumulated value on ties and against NaNs, as `grow`'s
-    /// comparisons do), four lanes at a time: the lower corners in lanes 0..3 of one vector,
-    /// the upper corners in lanes 1..4 of another (floats 0..4 and 2..6 of each box).
+    /// comparisons do), each box's corners as two vectors (`f4::prim_box`, lanes 0..3).
     #[inline]
     pub fn of_prims(prims: &[PrimBounds]) -> Bounds {
         let mut lower = F4::splat(f32::INFINITY);
         let mut upper = F4::splat(f32::NEG_INFINITY);
         for p in prims {
-            let f = p.floats();
-            let (lo, hi) = (&f[0..4], &f[2..6]);
+            let (lo, hi) = f4::prim_box(p);
             // `x.min(acc)` is `x < acc ? x : acc`: `grow`'s `if x < acc { acc = x }`.
-            lower = F4::load4(lo.try_into().unwrap_or(&[0.0; 4])).min(lower);
-            upper = F4::load4(hi.try_into().unwrap_or(&[0.0; 4])).max(upper);
+            lower = lo.min(lower);
+            upper = hi.max(upper);
         }
         let (l, u) = (lower.to_array(), upper.to_array());
         Bounds {
             min: [l[0], l[1], l[2]],
-            max: [u[1], u[2], u[3]],
+            max: [u[0], u[1], u[2]],
         }
     }
 }

@@ -162,8 +162,9 @@ impl Bvh {
                     ) else {
                         continue;
                     };
-                    if boxes.len() <= HITS {
-                        // Room for the whole leaf first: no check per primitive.
+                    // The leaf in pieces the hit buffer holds (the whole leaf, unless it is
+                    // larger): room is made once per piece, not checked per primitive.
+                    for (boxes, indices) in boxes.chunks(HITS).zip(indices.chunks(HITS)) {
                         if k + boxes.len() > HITS {
                             hits[..k].iter().for_each(|&i| f(i));
                             k = 0;
@@ -173,16 +174,6 @@ impl Bvh {
                             // `k` stays below `HITS` here: the modulo never changes it, only
                             // spares the bounds check.
                             hits[k % HITS] = index;
-                            k += overlap(blo, bhi, q4.0, q4.1) as usize;
-                        }
-                    } else {
-                        for (b, &index) in boxes.iter().zip(indices) {
-                            if k == HITS {
-                                hits.iter().for_each(|&i| f(i));
-                                k = 0;
-                            }
-                            let (blo, bhi) = prim_box(b);
-                            hits[k] = index;
                             k += overlap(blo, bhi, q4.0, q4.1) as usize;
                         }
                     }
