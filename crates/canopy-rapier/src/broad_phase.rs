@@ -1778,14 +1778,13 @@ impl BroadPhase for CanopyBroadPhase {
                 .extend(SetBits::new(&bits).map(|i| hints.get(i as usize).copied().unwrap_or(0)));
         }
         let shapes_mixed = self.shapes_mixed || !crate::shape_box::written_out_agrees();
+        let body_bytes = bodies
+            .len()
+            .saturating_mul(std::mem::size_of::<RigidBody>());
         let set_bytes = colliders
             .len()
             .saturating_mul(std::mem::size_of::<Collider>())
-            .saturating_add(
-                bodies
-                    .len()
-                    .saturating_mul(std::mem::size_of::<RigidBody>()),
-            );
+            .saturating_add(body_bytes);
         let ahead = if modified_colliders.len().saturating_mul(DENSE_EXAMINE) >= colliders.len()
             && set_bytes >= AHEAD_MIN_BYTES
         {
@@ -1806,9 +1805,6 @@ impl BroadPhase for CanopyBroadPhase {
             shapes_mixed,
             margins,
         };
-        let body_bytes = bodies
-            .len()
-            .saturating_mul(std::mem::size_of::<RigidBody>());
         let retyped = if body_bytes > DELAYED_BODY_BYTES || self.delay_body_types {
             self.examine_all::<true>(&pass, events)
         } else {
