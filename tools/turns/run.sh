@@ -41,8 +41,8 @@ build "$out/src" "$out/target" "$out/compare-old"
 runs="$out/runs.txt"
 : >"$runs"
 for turn in $(seq 1 "$turns"); do
-    for build in old new; do
-        "$out/compare-$build" --scene "$scene" 2>&1 | awk -v b="$build" -v s="$scene" '
+    for which in old new; do
+        "$out/compare-$which" --scene "$scene" 2>&1 | awk -v b="$which" -v s="$scene" '
             $1 == s && /\|/ { split($0, f, "|"); split(f[2], t, " "); ratio = t[3]; sub("x", "", ratio); canopy = t[2] }
             /canopy phases/ { gsub(",", ""); for (i = 1; i <= NF; i++) if ($i ~ /^[0-9.]+$/) phases = phases " " $i }
             END { print b, ratio, canopy phases }' >>"$runs"
@@ -51,12 +51,12 @@ for turn in $(seq 1 "$turns"); do
 done
 
 # Medians per build and column.
-echo "build  ratio  canopy  [removals examine trees search pair-edits liveness finish moved-per-step] (medians of $turns runs; ms per step)"
-for build in old new; do
-    cols=$(awk -v b="$build" '$1 == b { print NF - 1; exit }' "$runs")
-    line="$build"
+echo "build  ratio  canopy  [removals examine trees search pair-edits liveness finish] (ms per step)  [moved per step]  (medians of $turns runs)"
+for which in old new; do
+    cols=$(awk -v b="$which" '$1 == b { print NF - 1; exit }' "$runs")
+    line="$which"
     for c in $(seq 2 $((cols + 1))); do
-        m=$(awk -v b="$build" -v c="$c" '$1 == b { print $c }' "$runs" | sort -g |
+        m=$(awk -v b="$which" -v c="$c" '$1 == b { print $c }' "$runs" | sort -g |
             awk '{ v[NR] = $1 } END { print (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2 }')
         line="$line $m"
     done
