@@ -32,7 +32,7 @@ use crate::box_lanes::BoxLanes;
 use crate::config::{CanopyBroadPhaseConfig, ConfigError};
 use crate::filter::{FilterData, Mobility};
 use crate::pair_set::{unkey, Edge, PairSet};
-use crate::proxy::{Loc, Proxy};
+use crate::proxy::{Loc, Place, Proxy};
 use crate::proxy_tree::{ProxyTree, DEAD, MOVING_LEAF_SIZE};
 use crate::queries::{QueryMirror, QueryOverlay};
 use crate::shape_box::Written;
@@ -403,6 +403,9 @@ pub struct CanopyBroadPhase {
     config: CanopyBroadPhaseConfig,
     /// Indexed by the collider handle's index.
     pub(crate) proxies: Vec<Option<Proxy>>,
+    /// Indexed like `proxies`: where each proxy is in its tree, and its flags for this update
+    /// (apart from the records, which the examine loop streams: `proxy.rs`).
+    places: Vec<Place>,
     pub(crate) trees: [ProxyTree; 3],
     pairs: PairSet,
     moved: Vec<u32>,
@@ -510,7 +513,7 @@ impl CanopyBroadPhase {
         self.pairs.live_pairs().filter_map(|(a, b)| {
             let pa = self.proxies.get(a as usize)?.as_ref()?;
             let pb = self.proxies.get(b as usize)?.as_ref()?;
-            Some((pa.handle, pb.handle))
+            Some((pa.handle(a), pb.handle(b)))
         })
     }
 
@@ -541,7 +544,7 @@ impl CanopyBroadPhase {
                 let should = pa.fat.intersects(&pb.fat) && pa.filter.may_pair(&pb.filter);
                 let is = partners.iter().any(|e| e.other == b);
                 if should != is {
-                    wrong.push((pa.handle, pb.handle, should));
+                    wrong.push((pa.handle(a), pb.handle(b), should));
                 }
             }
         }
@@ -557,7 +560,7 @@ impl CanopyBroadPhase {
             .proxies
             .get(handle.into_raw_parts().0 as usize)?
             .as_ref()?;
-        (p.handle == handle).then_some(p)
+        p.is_for(handle).then_some(p)
     }
 
     /// `true` when the shapes of the colliders seem scattered over the heap rather than laid
@@ -589,14 +592,14 @@ impl CanopyBroadPhase {
 
     /// Drops a proxy and its pairs without events (the collider is gone or disabled).
     fn remove_proxy(&mut self, id: u32) {
-        let Some(mut p) = self.proxies.get_mut(id as usize).and_then(Option::take) else {
+        let Some(p) = self.proxies.get_mut(id as usize).and_then(Option::take) else {
             return;
         };
         if !p.is_valid() {
             self.stats.invalid -= 1;
         }
         self.mirror.touch(id);
-        self.take_out_of_tree(&mut p);
+        self.take_out_of_tree(id, p.mobility());
         if p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED) {
             self.fixed_fixed -= 1;
         }
@@ -618,11 +621,12 @@ impl CanopyBroadPhase {
         self.scratch.edges = edges;
     }
 
-    fn take_out_of_tree(&mut self, p: &mut Proxy) {
-        if let Some((other, i)) = self.trees[p.mobility as usize].remove(p) {
-            if let Some(o) = self.proxies[other as usize].as_mut() {
-                o.loc = Loc::Pending(i);
-            }
+    /// Takes proxy `id` out of the tree of `mobility` (its location becomes [`Loc::Out`]); the
+    /// caller keeps its record valid or drops it.
+    fn take_out_of_tree(&mut self, id: u32, mobility: Mobility) {
+        let loc = std::mem::take(&mut self.places[id as usize].loc);
+        if let Some((other, i)) = self.trees[mobility as usize].remove(loc) {
+            self.places[other as usize].loc = Loc::Pending(i);
         }
     }
 
@@ -630,15 +634,17 @@ impl CanopyBroadPhase {
     /// path's `take_unmet` relies on `moved` holding each id once.
     fn mark_moved(&mut self, id: u32) {
         self.mirror.touch(id);
-        if let Some(p) = self.proxies[id as usize].as_mut() {
+        if let Some(p) = self.proxies[id as usize].as_ref() {
+            let m = p.mobility() as usize;
+            let place = &mut self.places[id as usize];
             // Before the `moved` check: a second examination may have moved it to another tree.
-            match p.loc {
-                Loc::Tree(_) => self.moved_members[p.mobility as usize] = true,
-                Loc::Pending(_) => self.moved_pending[p.mobility as usize] = true,
+            match place.loc {
+                Loc::Tree(_) => self.moved_members[m] = true,
+                Loc::Pending(_) => self.moved_pending[m] = true,
                 Loc::Out => {}
             }
-            if !p.moved {
-                p.moved = true;
+            if !place.moved {
+                place.moved = true;
                 self.moved.push(id);
             }
         }
@@ -889,7 +895,7 @@ impl CanopyBroadPhase {
         // inside its fat box (nothing to do), or it gets a new fat box in place after the loop.
         if let Some(Some(p)) = self.proxies.get_mut(id as usize) {
             if enabled
-                && p.handle == handle
+                && p.is_for(handle)
                 && p.is_valid()
                 && p.filter.same_as_but_body_type(collider, parent.is_some())
             {
@@ -1074,7 +1080,7 @@ impl CanopyBroadPhase {
                 .proxies
                 .get(index as usize)
                 .and_then(Option::as_ref)
-                .is_some_and(|p| p.handle == handle && p.filter.body_type != rb.body_type());
+                .is_some_and(|p| p.is_for(handle) && p.filter.body_type != rb.body_type());
             if retyped {
                 self.examine_full(params, colliders, bodies, handle, margins, events);
             }
@@ -1108,13 +1114,14 @@ impl CanopyBroadPhase {
         };
         if fat.is_valid() {
             // Unless the full examination moved it already (filter, tree), only its box changed.
-            p.box_only = !p.moved;
+            let place = &mut self.places[id as usize];
+            place.box_only = !place.moved;
             let jumped = !fat.to_aabb().intersects(&p.fat);
             fat.write(&mut p.fat);
-            self.trees[p.mobility as usize].set_box(p, jumped);
+            self.trees[p.mobility() as usize].set_box(place.loc, p.fat, jumped);
             self.mark_moved(id);
         } else {
-            let handle = p.handle;
+            let handle = p.handle(id);
             self.examine_full(params, colliders, bodies, handle, margins, events);
         }
     }
@@ -1140,7 +1147,7 @@ impl CanopyBroadPhase {
         let enabled = collider.is_enabled();
 
         if let Some(Some(p)) = self.proxies.get(id as usize) {
-            if p.handle != handle {
+            if !p.is_for(handle) {
                 // A stale proxy under a reused index (its removal was not reported).
                 self.remove_proxy(id);
             }
@@ -1164,6 +1171,7 @@ impl CanopyBroadPhase {
 
         if id as usize >= self.proxies.len() {
             self.proxies.resize_with(id as usize + 1, || None);
+            self.places.resize(id as usize + 1, Place::default());
             self.tights.resize(id as usize + 1, Aabb::EMPTY);
             self.shape_hints.resize(id as usize + 1, 0);
             self.shape_kinds.resize(id as usize + 1, NO_KIND);
@@ -1177,17 +1185,16 @@ impl CanopyBroadPhase {
                 }
                 self.tights[id as usize] = tight;
                 self.note_shape(id, collider);
-                let mut p = Proxy {
-                    handle,
-                    fat,
+                let p = Proxy {
+                    generation: handle.into_raw_parts().1,
+                    fat: if valid { fat } else { Aabb::EMPTY },
                     filter,
-                    mobility,
-                    loc: Loc::Out,
-                    moved: false,
-                    box_only: false,
                 };
+                // A proxy removed earlier in this update may have left its flags here.
+                self.places[id as usize].box_only = false;
                 if valid {
-                    self.trees[mobility as usize].insert(id, &mut p);
+                    self.places[id as usize].loc =
+                        self.trees[mobility as usize].insert(id, &filter);
                 } else {
                     self.stats.invalid += 1;
                 }
@@ -1202,7 +1209,8 @@ impl CanopyBroadPhase {
         if !valid {
             if p.is_valid() {
                 self.mirror.touch(id);
-                self.take_out_of_tree(&mut p);
+                self.take_out_of_tree(id, p.mobility());
+                p.fat = Aabb::EMPTY;
                 self.stats.invalid += 1;
                 self.proxies[id as usize] = Some(p);
                 self.drop_pairs(id, Some(events));
@@ -1214,6 +1222,8 @@ impl CanopyBroadPhase {
 
         self.tights[id as usize] = tight;
         self.note_shape(id, collider);
+        // The tree it is in now: the filter below may change the body type it was filed under.
+        let filed = p.mobility();
         let mut moved = false;
         if p.filter != filter {
             let had_ff = p.filter.active.contains(ActiveCollisionTypes::FIXED_FIXED);
@@ -1224,24 +1234,23 @@ impl CanopyBroadPhase {
             self.trees[mobility as usize].summary.add(&p.filter);
             moved = true;
         }
-        if !p.is_valid() || p.mobility != mobility {
+        if !p.is_valid() || filed != mobility {
             if p.is_valid() {
-                self.take_out_of_tree(&mut p);
+                self.take_out_of_tree(id, filed);
             } else {
                 self.stats.invalid -= 1;
             }
-            p.mobility = mobility;
             p.fat = fat;
-            self.trees[mobility as usize].insert(id, &mut p);
+            self.places[id as usize].loc = self.trees[mobility as usize].insert(id, &p.filter);
             moved = true;
         } else if !p.fat.contains(&tight) {
             let jumped = !p.fat.intersects(&fat);
             p.fat = fat;
-            self.trees[mobility as usize].set_box(&p, jumped);
+            self.trees[mobility as usize].set_box(self.places[id as usize].loc, fat, jumped);
             moved = true;
         }
         if moved {
-            p.box_only = false;
+            self.places[id as usize].box_only = false;
         }
         self.proxies[id as usize] = Some(p);
         if moved {
@@ -1253,7 +1262,7 @@ impl CanopyBroadPhase {
     fn collider_pair(&self, a: u32, b: u32) -> Option<ColliderPair> {
         let (a, b) = if a < b { (a, b) } else { (b, a) };
         match (&self.proxies[a as usize], &self.proxies[b as usize]) {
-            (Some(pa), Some(pb)) => Some(ColliderPair::new(pa.handle, pb.handle)),
+            (Some(pa), Some(pb)) => Some(ColliderPair::new(pa.handle(a), pb.handle(b))),
             _ => None,
         }
     }
@@ -1335,11 +1344,8 @@ impl CanopyBroadPhase {
                 }
                 continue;
             };
-            let pending_marks = pending_bvh.marks(|i| {
-                self.proxies[ta.pending[i as usize] as usize]
-                    .as_ref()
-                    .is_some_and(|p| p.moved)
-            });
+            let pending_marks =
+                pending_bvh.marks(|i| self.places[ta.pending[i as usize] as usize].moved);
             for b in Mobility::ALL {
                 let tb = &self.trees[b as usize];
                 if tb.members.is_empty() || !self.trees_may_pair(a, b) {
@@ -1421,7 +1427,7 @@ impl CanopyBroadPhase {
                 let Some(o) = &self.proxies[other as usize] else {
                     return;
                 };
-                if o.moved && other < id {
+                if self.places[other as usize].moved && other < id {
                     return;
                 }
                 if p.filter.may_pair(&o.filter) {
@@ -1432,7 +1438,7 @@ impl CanopyBroadPhase {
         for e in known {
             let met = seen.take(e.other);
             let ended = !met
-                || (!p.box_only
+                || (!self.places[id as usize].box_only
                     && self.proxies[e.other as usize]
                         .as_ref()
                         .is_none_or(|o| !p.filter.may_pair(&o.filter)));
@@ -1470,7 +1476,7 @@ impl CanopyBroadPhase {
 
     /// `false` when no collider of tree `m` can pair with `p`.
     fn may_query(&self, p: &Proxy, m: Mobility) -> bool {
-        if m == Mobility::Fixed && p.mobility == Mobility::Fixed && self.fixed_fixed == 0 {
+        if m == Mobility::Fixed && p.mobility() == Mobility::Fixed && self.fixed_fixed == 0 {
             return false;
         }
         self.trees[m as usize].summary.may_pair_with(&p.filter)
@@ -1602,7 +1608,8 @@ impl CanopyBroadPhase {
         debug_assert!(moved.iter().all(|&id| {
             let p = self.proxies[id as usize].as_ref();
             p.is_none_or(|p| {
-                !matches!(p.loc, Loc::Tree(_)) || self.moved_members[p.mobility as usize]
+                !matches!(self.places[id as usize].loc, Loc::Tree(_))
+                    || self.moved_members[p.mobility() as usize]
             })
         }));
         let marks = self.member_marks(&moved_bits);
@@ -1839,7 +1846,7 @@ impl BroadPhase for CanopyBroadPhase {
                 ..Default::default()
             };
             let rebuilds = self.trees[m as usize].rebuilds;
-            self.trees[m as usize].maintain(&mut self.proxies, &policy, build);
+            self.trees[m as usize].maintain(&self.proxies, &mut self.places, &policy, build);
             if self.trees[m as usize].rebuilds != rebuilds {
                 // The pending proxies are members now.
                 self.moved_members[m as usize] |= self.moved_pending[m as usize];
@@ -1905,12 +1912,11 @@ impl BroadPhase for CanopyBroadPhase {
 
         for (k, &id) in moved.iter().enumerate() {
             if let Some(&ahead) = moved.get(k + PREFETCH_AHEAD) {
-                prefetch(self.proxies.as_ptr().wrapping_add(ahead as usize));
+                prefetch(self.places.as_ptr().wrapping_add(ahead as usize));
             }
-            if let Some(p) = self.proxies[id as usize].as_mut() {
-                p.moved = false;
-                p.box_only = false;
-            }
+            let place = &mut self.places[id as usize];
+            place.moved = false;
+            place.box_only = false;
         }
         self.moved_members = [false; 3];
         self.moved_pending = [false; 3];
@@ -2122,6 +2128,124 @@ mod tests {
                 assert_eq!(pairs, expected, "delay {delay}, body {i}");
             }
         }
+    }
+
+    /// The first disagreement between the proxy records and their places (`proxy.rs`): a
+    /// proxy is in a tree exactly when its record is valid, in the tree of its body type, at
+    /// the slot or pending index that holds its id there; every live tree slot and pending
+    /// entry points back at such a proxy; no flag outlives an update.
+    fn places_disagree(bp: &CanopyBroadPhase) -> Option<String> {
+        for (id, place) in bp.places.iter().enumerate() {
+            let p = bp.proxies.get(id).and_then(Option::as_ref);
+            if place.moved || place.box_only {
+                return Some(format!("{id}: flags left set"));
+            }
+            let tree = match (p, place.loc) {
+                (None, Loc::Out) => continue,
+                (Some(p), Loc::Out) if !p.is_valid() => continue,
+                (Some(p), _) if p.is_valid() => &bp.trees[p.mobility() as usize],
+                _ => return Some(format!("{id}: {:?} with {:?}", place.loc, p.map(|p| p.fat))),
+            };
+            let holds = match place.loc {
+                Loc::Tree(slot) => tree.members.get(slot as usize) == Some(&(id as u32)),
+                Loc::Pending(i) => tree.pending.get(i as usize) == Some(&(id as u32)),
+                Loc::Out => false,
+            };
+            if !holds {
+                return Some(format!("{id}: {:?} does not hold it", place.loc));
+            }
+        }
+        for tree in &bp.trees {
+            let slots = tree
+                .members
+                .iter()
+                .enumerate()
+                .filter(|&(_, &id)| id != DEAD);
+            for (slot, &id) in slots {
+                if bp.places.get(id as usize).map(|p| p.loc) != Some(Loc::Tree(slot as u32)) {
+                    return Some(format!("slot {slot}: member {id} placed elsewhere"));
+                }
+            }
+            for (i, &id) in tree.pending.iter().enumerate() {
+                if bp.places.get(id as usize).map(|p| p.loc) != Some(Loc::Pending(i as u32)) {
+                    return Some(format!("pending {i}: {id} placed elsewhere"));
+                }
+            }
+        }
+        None
+    }
+
+    /// Records and places agree (`places_disagree`) after every update, through what moves a
+    /// proxy between trees or out of them: a churning scene (removals, reused indices,
+    /// rebuilds), and by hand a box turned invalid and valid again, body types changed both
+    /// ways, a collider disabled and enabled, and a collider removed with its index reused.
+    #[test]
+    fn proxy_records_and_places_agree() {
+        let mut bp = CanopyBroadPhase::new();
+        for (k, u) in record(spawn_storm(Size::Small), 60).iter().enumerate() {
+            u.apply(&mut bp, &mut Vec::new());
+            assert_eq!(places_disagree(&bp), None, "spawn_storm update {k}");
+        }
+
+        let mut bodies = RigidBodySet::new();
+        let mut colliders = ColliderSet::new();
+        let mut handles = Vec::new();
+        for i in 0..40 {
+            let b =
+                bodies.insert(RigidBodyBuilder::dynamic().translation(vector![i as f32, 0.0, 0.0]));
+            colliders.insert_with_parent(ColliderBuilder::ball(0.6), b, &mut bodies);
+            handles.push(b);
+        }
+        let params = IntegrationParameters::default();
+        let mut bp = CanopyBroadPhase::new();
+        let update = |bp: &mut CanopyBroadPhase,
+                      bodies: &RigidBodySet,
+                      colliders: &ColliderSet,
+                      removed: &[ColliderHandle],
+                      what: &str| {
+            let all: Vec<ColliderHandle> = colliders.iter().map(|(h, _)| h).collect();
+            bp.update(&params, colliders, bodies, &all, removed, &mut Vec::new());
+            assert_eq!(places_disagree(bp), None, "{what}");
+        };
+        update(&mut bp, &bodies, &colliders, &[], "inserted");
+        assert_eq!(bp.stats().pairs, 39);
+        let c5 = bodies[handles[5]].colliders()[0];
+        colliders[c5].set_translation(vector![f32::NAN, 0.0, 0.0]);
+        update(&mut bp, &bodies, &colliders, &[], "invalid");
+        assert!(bp.fat_aabb(c5).is_none());
+        assert_eq!(bp.stats().pairs, 37);
+        colliders[c5].set_translation(vector![5.0, 0.0, 0.0]);
+        update(&mut bp, &bodies, &colliders, &[], "valid again");
+        assert!(bp.fat_aabb(c5).is_some());
+        assert_eq!(bp.stats().pairs, 39);
+        for (ty, what) in [
+            (RigidBodyType::Fixed, "fixed"),
+            (RigidBodyType::KinematicPositionBased, "kinematic"),
+            (RigidBodyType::Dynamic, "dynamic"),
+        ] {
+            for &i in &[0, 7, 8, 39] {
+                bodies[handles[i]].set_body_type(ty, true);
+            }
+            update(&mut bp, &bodies, &colliders, &[], what);
+        }
+        assert_eq!(bp.stats().pairs, 39);
+        let c9 = bodies[handles[9]].colliders()[0];
+        colliders[c9].set_enabled(false);
+        update(&mut bp, &bodies, &colliders, &[c9], "disabled");
+        assert_eq!(bp.stats().pairs, 37);
+        colliders[c9].set_enabled(true);
+        update(&mut bp, &bodies, &colliders, &[], "enabled");
+        assert_eq!(bp.stats().pairs, 39);
+        let c3 = bodies[handles[3]].colliders()[0];
+        colliders.remove(c3, &mut IslandManager::new(), &mut bodies, true);
+        update(&mut bp, &bodies, &colliders, &[c3], "removed");
+        assert_eq!(bp.stats().pairs, 37);
+        let reused =
+            colliders.insert_with_parent(ColliderBuilder::ball(0.6), handles[3], &mut bodies);
+        assert_eq!(reused.into_raw_parts().0, c3.into_raw_parts().0);
+        update(&mut bp, &bodies, &colliders, &[], "index reused");
+        assert!(bp.fat_aabb(reused).is_some() && bp.fat_aabb(c3).is_none());
+        assert_eq!(bp.stats().pairs, 39);
     }
 
     fn plain(events: &[BroadPhasePairEvent]) -> Vec<(bool, ColliderHandle, ColliderHandle)> {

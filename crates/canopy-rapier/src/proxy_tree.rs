@@ -5,8 +5,8 @@
 //! too large, or the SAH cost has drifted (see [`crate::RebuildPolicy`]).
 
 use crate::config::RebuildPolicy;
-use crate::filter::TreeFilterSummary;
-use crate::proxy::{Loc, Proxy};
+use crate::filter::{FilterData, TreeFilterSummary};
+use crate::proxy::{Loc, Place, Proxy};
 use canopy_core::{Aabb, BuildOptions, Builder, Bvh, PairMarks, Ray};
 use rapier3d::na::Point3;
 
@@ -82,16 +82,19 @@ impl ProxyTree {
         self.members.len() - self.dead + self.pending.len()
     }
 
-    pub fn insert(&mut self, id: u32, proxy: &mut Proxy) {
-        proxy.loc = Loc::Pending(self.pending.len() as u32);
+    /// Adds proxy `id` (filter inputs `filter`) to the pending list; returns its location.
+    pub fn insert(&mut self, id: u32, filter: &FilterData) -> Loc {
+        let loc = Loc::Pending(self.pending.len() as u32);
         self.pending.push(id);
         self.pending_dirty = true;
-        self.summary.add(&proxy.filter);
+        self.summary.add(filter);
+        loc
     }
 
-    /// Takes `proxy` out; returns the proxy id whose pending index changed, if any.
-    pub fn remove(&mut self, proxy: &mut Proxy) -> Option<(u32, u32)> {
-        let moved = match proxy.loc {
+    /// Takes the proxy at `loc` out (the caller marks it [`Loc::Out`]); returns the proxy id
+    /// whose pending index changed, if any, with its new index.
+    pub fn remove(&mut self, loc: Loc) -> Option<(u32, u32)> {
+        match loc {
             Loc::Tree(slot) => {
                 self.members[slot as usize] = DEAD;
                 self.dead += 1;
@@ -103,20 +106,18 @@ impl ProxyTree {
                 self.pending.get(i as usize).map(|&other| (other, i))
             }
             Loc::Out => None,
-        };
-        proxy.loc = Loc::Out;
-        moved
+        }
     }
 
-    /// Records a new fat box for a proxy of this tree; `jumped`: the new box does not overlap
-    /// the one it replaces.
-    pub fn set_box(&mut self, proxy: &Proxy, jumped: bool) {
-        match proxy.loc {
+    /// Records `fat`, the new fat box of the proxy at `loc` in this tree; `jumped`: the new box
+    /// does not overlap the one it replaces.
+    pub fn set_box(&mut self, loc: Loc, fat: Aabb, jumped: bool) {
+        match loc {
             Loc::Tree(slot) => {
-                self.changes.push((slot, proxy.fat));
+                self.changes.push((slot, fat));
                 self.jumped += jumped as usize;
             }
-            Loc::Pending(i) => self.pending_changes.push((i, proxy.fat)),
+            Loc::Pending(i) => self.pending_changes.push((i, fat)),
             Loc::Out => {}
         }
     }
@@ -130,16 +131,17 @@ impl ProxyTree {
             || (self.dead > 0 && self.dead as f64 > size * policy.max_dead_fraction)
     }
 
-    /// Brings the BVH up to date: rebuild or refit as the policy says.
-    /// `build`: the options of this tree's builds (the pending tree is always an LBVH, built
-    /// serially, with the same leaves).
+    /// Brings the BVH up to date: rebuild or refit as the policy says (a rebuild writes the
+    /// members' new slots into `places`). `build`: the options of this tree's builds (the
+    /// pending tree is always an LBVH, built serially, with the same leaves).
     pub fn maintain(
         &mut self,
-        proxies: &mut [Option<Proxy>],
+        proxies: &[Option<Proxy>],
+        places: &mut [Place],
         policy: &RebuildPolicy,
         build: BuildOptions,
     ) {
-        self.maintain_members(proxies, policy, build);
+        self.maintain_members(proxies, places, policy, build);
         if self.pending.len() <= SCANNED_PENDING {
             // Scanned, not queried (a lone ground's pending tree cost each dynamic proxy's
             // query about 37 ns, the scan of its box a few).
@@ -187,12 +189,13 @@ impl ProxyTree {
 
     fn maintain_members(
         &mut self,
-        proxies: &mut [Option<Proxy>],
+        proxies: &[Option<Proxy>],
+        places: &mut [Place],
         policy: &RebuildPolicy,
         build: BuildOptions,
     ) {
         if self.needs_rebuild(policy) {
-            self.rebuild(proxies, build);
+            self.rebuild(proxies, places, build);
         } else if !self.changes.is_empty() {
             self.refits += 1;
             // Most members moved, and some jumped since the last check: see below.
@@ -202,7 +205,7 @@ impl ProxyTree {
             if refit.is_err() {
                 // Boxes are validated before they reach the tree; rebuilding is the safe answer
                 // should that ever fail.
-                self.rebuild(proxies, build);
+                self.rebuild(proxies, places, build);
                 return;
             }
             // The cost is one pass over the nodes: check it every few refits only, or at once
@@ -219,13 +222,18 @@ impl ProxyTree {
                 self.refits_since_check = 0;
                 self.jumped = 0;
                 if self.bvh.sah_cost(1.0, 1.0) > self.built_cost * policy.max_cost_growth {
-                    self.rebuild(proxies, build);
+                    self.rebuild(proxies, places, build);
                 }
             }
         }
     }
 
-    pub fn rebuild(&mut self, proxies: &mut [Option<Proxy>], build: BuildOptions) {
+    pub fn rebuild(
+        &mut self,
+        proxies: &[Option<Proxy>],
+        places: &mut [Place],
+        build: BuildOptions,
+    ) {
         let mut members: Vec<u32> = self
             .members
             .iter()
@@ -239,10 +247,10 @@ impl ProxyTree {
         self.refits_since_check = 0;
         self.summary = TreeFilterSummary::default();
         for (slot, &id) in members.iter().enumerate() {
+            places[id as usize].loc = Loc::Tree(slot as u32);
             let p = proxies[id as usize]
-                .as_mut()
+                .as_ref()
                 .expect("tree member has a proxy");
-            p.loc = Loc::Tree(slot as u32);
             boxes.push(p.fat);
             self.summary.add(&p.filter);
         }
@@ -257,9 +265,7 @@ impl ProxyTree {
                 self.bvh = Bvh::new();
                 self.members.clear();
                 for (i, &id) in members.iter().enumerate() {
-                    if let Some(p) = proxies[id as usize].as_mut() {
-                        p.loc = Loc::Pending(i as u32);
-                    }
+                    places[id as usize].loc = Loc::Pending(i as u32);
                 }
                 self.pending = members;
                 self.pending_fresh = false;

@@ -88,7 +88,7 @@ impl CanopyBroadPhase {
             let proxy = self.proxies.get(id as usize).and_then(Option::as_ref);
             if let Some(p) = proxy {
                 seen[id as usize] = true;
-                if p.handle != handle {
+                if !p.is_for(handle) {
                     self.overlay.mark_stale(id);
                 }
             }
@@ -103,7 +103,7 @@ impl CanopyBroadPhase {
             // The queries cull with the fat box, then test the collision box of the last update
             // before the shape: both must still hold the collider.
             let covered = proxy.is_some_and(|p| {
-                p.handle == handle
+                p.is_for(handle)
                     && p.is_valid()
                     && p.fat.contains(&aabb)
                     && self.tights[id as usize].contains(&aabb)
