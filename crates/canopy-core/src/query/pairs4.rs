@@ -205,7 +205,33 @@ struct Walk<'a, F, M> {
     f: F,
 }
 
-impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
+impl<'a, F: FnMut(u32, u32), M: LaneMarks> Walk<'a, F, M> {
+    /// A walk of `t` with marks `marks`, the window on or off (`ahead`), handing its pairs to
+    /// `f`.
+    fn new(t: &'a Bvh, marks: &'a M, ahead: bool, f: F) -> Self {
+        Walk {
+            t,
+            r4: t.four_wide(),
+            marks,
+            tasks: Vec::with_capacity(256),
+            qstack: Vec::with_capacity(64),
+            ahead,
+            pairs: [(0, 0); PAIR_BUFFER],
+            waiting: 0,
+            f,
+        }
+    }
+
+    /// For tests: `leaf_self` by groups, or pair by pair.
+    #[cfg(test)]
+    fn leaf_self_either(&mut self, first: usize, count: usize, by_groups: bool) {
+        if by_groups {
+            self.leaf_self(first, count);
+        } else {
+            self.leaf_self_pairwise(first, count);
+        }
+    }
+
     /// Writes the pair of primitives `a` and `b` (different) at the end of the pair buffer and
     /// keeps it when `hit`: the leaves' tests take no branch on their outcome, which no
     /// predictor guesses where boxes crowd. The buffer goes to `f` when full and at the end of
@@ -391,7 +417,68 @@ impl<F: FnMut(u32, u32), M: LaneMarks> Walk<'_, F, M> {
     }
 
     /// The pairs within the leaf of `count` primitives from slot `first` (with a marked side).
+    /// Up to `FILTERED_LEAF` primitives: their boxes laid out by face, four to a group, and
+    /// each primitive tested against the groups after it four at a time; only the overlapping
+    /// pairs with a marked side are written, in the same order as the pair-by-pair loop
+    /// (`leaf_self_pairwise`, which larger leaves take).
     fn leaf_self(&mut self, first: usize, count: usize) {
+        if count <= 4 || count > FILTERED_LEAF {
+            // At most six pairs: a group would cost about as much.
+            self.leaf_self_pairwise(first, count);
+            return;
+        }
+        let t = self.t;
+        let prims = &t.prim_bounds[first..first + count];
+        let groups = count.div_ceil(4);
+        // Group `g`, face `f` (min x, y, z, max x, y, z), lane `l`: primitive `4 g + l`. The
+        // lanes past `count` hold an inverted box, which overlaps nothing.
+        let mut faces = [[[0.0f32; 4]; 6]; FILTERED_LEAF / 4];
+        let last = &mut faces[groups - 1];
+        for f in &mut last[..3] {
+            *f = [f32::INFINITY; 4];
+        }
+        for f in &mut last[3..] {
+            *f = [f32::NEG_INFINITY; 4];
+        }
+        let mut marked = 0u32;
+        for (k, p) in prims.iter().enumerate() {
+            let g = &mut faces[k / 4];
+            for a in 0..3 {
+                g[a][k % 4] = p.min[a];
+                g[3 + a][k % 4] = p.max[a];
+            }
+            marked |= ((M::ALL || self.marks.slot(first + k)) as u32) << k;
+        }
+        for (s, prim) in prims[..count - 1].iter().enumerate() {
+            let p = Splat::prim(prim);
+            let mut hits = 0u32;
+            for (g, group) in faces.iter().enumerate().take(groups).skip((s + 1) / 4) {
+                let mut m = F4::load4(&group[0])
+                    .le(p.hi[0])
+                    .and(p.lo[0].le(F4::load4(&group[3])));
+                for a in 1..3 {
+                    m = m
+                        .and(F4::load4(&group[a]).le(p.hi[a]))
+                        .and(p.lo[a].le(F4::load4(&group[3 + a])));
+                }
+                hits |= m.bits() << (4 * g);
+            }
+            // The primitives after `s`, with a marked side.
+            hits &= !((2u32 << s) - 1);
+            if marked >> s & 1 == 0 {
+                hits &= marked;
+            }
+            let ip = t.prim_indices[first + s];
+            while hits != 0 {
+                let u = hits.trailing_zeros() as usize;
+                hits &= hits - 1;
+                self.emit(ip, t.prim_indices[first + u], true);
+            }
+        }
+    }
+
+    /// [`Walk::leaf_self`] pair by pair, for leaves of more than `FILTERED_LEAF` primitives.
+    fn leaf_self_pairwise(&mut self, first: usize, count: usize) {
         let t = self.t;
         for s in first..first + count {
             let (plo, phi) = prim_box(&t.prim_bounds[s]);
@@ -611,17 +698,7 @@ fn walk<M: LaneMarks>(
     nodes: std::ops::Range<usize>,
     f: impl FnMut(u32, u32),
 ) {
-    let mut w = Walk {
-        t,
-        r4: t.four_wide(),
-        marks,
-        tasks: Vec::with_capacity(256),
-        qstack: Vec::with_capacity(64),
-        ahead,
-        pairs: [(0, 0); PAIR_BUFFER],
-        waiting: 0,
-        f,
-    };
+    let mut w = Walk::new(t, marks, ahead, f);
     w.run(nodes);
     w.flush();
 }
@@ -743,8 +820,9 @@ mod tests {
     fn both_modes_match_brute_force() {
         let mut r = rng(11);
         for builder in [Builder::BinnedSah, Builder::Lbvh] {
-            // 20: leaves too large for `leaf_leaf`'s filtered loop take the full one.
-            for leaf in [1, 3, 8, 20] {
+            // 20: leaves too large for `leaf_leaf`'s filtered loop and `leaf_self`'s groups
+            // take the pair-by-pair loops; 13 and 16 fill the groups partly and wholly.
+            for leaf in [1, 3, 8, 13, 16, 20] {
                 for n in [1, 2, 5, 17, 300, 1500] {
                     let b = boxes(n, (n as f32).cbrt() * 2.0, 1.0, &mut r);
                     let options = BuildOptions {
@@ -759,6 +837,68 @@ mod tests {
                     t.refit(&b).unwrap();
                     check(&t, &b);
                 }
+            }
+        }
+    }
+
+    /// `leaf_self` by groups of four writes the same pairs in the same order as pair by pair,
+    /// for every leaf of trees with leaves of up to 16 primitives (crowded boxes, so that
+    /// many pairs within a leaf overlap), with no marks and with marks of each density.
+    #[test]
+    fn leaf_self_by_groups_matches_pair_by_pair() {
+        let mut r = rng(14);
+        for leaf in [2, 5, 12, 16] {
+            let b = boxes(400, 6.0, 1.0, &mut r);
+            let options = BuildOptions {
+                max_leaf_size: leaf,
+                ..Default::default()
+            };
+            let t = Bvh::build(&b, options).unwrap();
+            let r4 = t.four_wide();
+            let leaves: Vec<(usize, usize)> = (0..r4.nodes.len())
+                .flat_map(|k| {
+                    let n = r4.at(k);
+                    (0..4)
+                        .filter(move |&i| n.meta[i] > 1 && n.meta[i] != super::INTERIOR)
+                        .map(move |i| (n.first[i] as usize, n.meta[i] as usize))
+                })
+                .collect();
+            // Leaves fill more than one group of four wherever they may.
+            let largest = leaves.iter().map(|&(_, c)| c).max().unwrap_or(0);
+            assert!(largest > 4 || leaf < 5, "leaf {leaf}: largest {largest}");
+            for density in 0..5u64 {
+                let pm = t.marks(|i| {
+                    (i as u64)
+                        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                        .rotate_left(17)
+                        % 4
+                        < density
+                });
+                let view = pm.lane_view();
+                let (mut grouped, mut pairwise) = (Vec::new(), Vec::new());
+                for (out, by_groups) in [(&mut grouped, true), (&mut pairwise, false)] {
+                    let mut push = |a: u32, b: u32| out.push((a, b));
+                    if density == 4 {
+                        let mut w = super::Walk::new(&t, &super::AllMarked, false, &mut push);
+                        for &(first, count) in &leaves {
+                            w.leaf_self_either(first, count, by_groups);
+                        }
+                        w.flush();
+                    } else {
+                        let mut w = super::Walk::new(&t, &view, false, &mut push);
+                        for &(first, count) in &leaves {
+                            w.leaf_self_either(first, count, by_groups);
+                        }
+                        w.flush();
+                    }
+                }
+                // Nothing is marked at density 0.
+                assert_eq!(
+                    pairwise.is_empty(),
+                    density == 0,
+                    "leaf {leaf}, density {density}"
+                );
+                assert_eq!(grouped, pairwise, "leaf {leaf}, density {density}");
             }
         }
     }
