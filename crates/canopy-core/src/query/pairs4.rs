@@ -16,7 +16,8 @@
 //! a small window that prefetches their nodes a few tasks ahead. The primitive tests take no
 //! branch on their outcome (nor on the marks): every pair tested is written to a small buffer
 //! that advances only when the boxes overlap and a side is marked, and the buffer goes to the
-//! callback when full and at the end of the walk.
+//! callback when full and at the end of the walk. A leaf's pairs within itself are tested four
+//! at a time (its boxes laid out by face), and only the overlapping pairs are written.
 
 use super::ray::{Node4, Ray4, INTERIOR};
 use super::{prefetch, prefetch_node};
