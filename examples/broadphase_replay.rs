@@ -20,7 +20,7 @@
 //! `split` times Rapier's `BroadPhaseBvh` and canopy (with the overrides above) side by side,
 //! update by update on fresh copies of the sets, taking turns, five times over; it takes each
 //! update's median time and sums them by kind of canopy update: none moved, few moved (one
-//! query per moved proxy), many moved (at least one proxy in four: marked pair walks), and
+//! query per moved proxy), many moved (marked pair walks: `BroadPhaseStats::walked`), and
 //! those with a tree rebuild; and again by which of the step's two calls it is (the user's
 //! changes, or the positions after the integration), and by tenth of the recording (how the
 //! ratio evolves through the scene). It shows where canopy's time goes against
@@ -211,12 +211,11 @@ fn split(
                             (time(&mut rapier), c)
                         };
                         let s = canopy.stats();
-                        let proxies: usize = s.proxies.iter().sum();
                         let kind = if s.rebuilds > rebuilds {
                             3
                         } else if s.moved == 0 {
                             0
-                        } else if s.moved * 4 >= proxies {
+                        } else if s.walked {
                             2
                         } else {
                             1

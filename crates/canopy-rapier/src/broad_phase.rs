@@ -1581,7 +1581,8 @@ impl CanopyBroadPhase {
         let members: usize = self.trees.iter().map(|t| t.members.len()).sum();
         let mut found = std::mem::take(&mut self.scratch.found);
         let mut gone = std::mem::take(&mut self.scratch.gone);
-        if moved.len() * SPARSE_MOVES < members {
+        self.stats.walked = moved.len() * SPARSE_MOVES >= members;
+        if !self.stats.walked {
             // Few moved: one query each beats any pass over whole trees.
             let mut seen = std::mem::take(&mut self.scratch.seen);
             seen.fit(self.proxies.len());
@@ -1735,6 +1736,7 @@ impl BroadPhase for CanopyBroadPhase {
         if modified_colliders.is_empty() && removed_colliders.is_empty() {
             // Nothing changed, so no pair can start or end.
             self.stats.moved = 0;
+            self.stats.walked = false;
             self.stats.added = 0;
             self.stats.deleted = 0;
             self.stats.negative_loosening = 0;
@@ -2209,6 +2211,8 @@ mod tests {
         };
         update(&mut bp, &bodies, &colliders, &[], "inserted");
         assert_eq!(bp.stats().pairs, 39);
+        // Every proxy new, none in a tree yet: the pairs came from the walks.
+        assert!(bp.stats().walked && bp.stats().moved == 40);
         let c5 = bodies[handles[5]].colliders()[0];
         colliders[c5].set_translation(vector![f32::NAN, 0.0, 0.0]);
         update(&mut bp, &bodies, &colliders, &[], "invalid");
@@ -2218,6 +2222,8 @@ mod tests {
         update(&mut bp, &bodies, &colliders, &[], "valid again");
         assert!(bp.fat_aabb(c5).is_some());
         assert_eq!(bp.stats().pairs, 39);
+        // One proxy back among 39 tree members: one query.
+        assert!(!bp.stats().walked && bp.stats().moved == 1);
         for (ty, what) in [
             (RigidBodyType::Fixed, "fixed"),
             (RigidBodyType::KinematicPositionBased, "kinematic"),

@@ -14,6 +14,9 @@ pub struct BroadPhaseStats {
     pub candidates: usize,
     /// Proxies whose fat box or filter changed in the last update (the move buffer).
     pub moved: usize,
+    /// The last update found the moved proxies' pairs by walking whole trees (marked pair
+    /// walks, taken when many proxies moved), not by one box query per moved proxy.
+    pub walked: bool,
     /// `AddPair` events of the last update.
     pub added: usize,
     /// `DeletePair` events of the last update.
