@@ -1512,6 +1512,11 @@ impl CanopyBroadPhase {
         // `(id, k)`: edge `k` of the partner list of `id`.
         let mut parted = std::mem::take(&mut self.scratch.parted);
         for &id in moved {
+            // Most moved proxies of a falling grid have no live pair: their lists, allocated
+            // apart, are not read.
+            if !self.pairs.has_live(id) {
+                continue;
+            }
             let reach = self.tights[id as usize].loosened(gap);
             for (k, e) in self.pairs.partners(id).iter().enumerate() {
                 if e.live() && !reach.intersects(&self.tights[e.other as usize]) {

@@ -122,6 +122,13 @@ impl PairSet {
         self.waiting.get(a as usize).copied().unwrap_or(0)
     }
 
+    /// `true` when some candidate of `a` is live. Reads the list's length and the count of
+    /// its waiting candidates, not the list.
+    #[inline]
+    pub fn has_live(&self, a: u32) -> bool {
+        self.partners(a).len() as u32 > self.waiting(a)
+    }
+
     fn count_waiting(&mut self, a: u32, b: u32, delta: i32) {
         for x in [a, b] {
             let w = &mut self.waiting[x as usize];
@@ -505,6 +512,8 @@ mod tests {
                 for id in 0..12u32 {
                     let w = model.iter().filter(|(&(x, y), &l)| !l && (x == id || y == id)).count();
                     prop_assert_eq!(set.waiting(id) as usize, w);
+                    let live = model.iter().any(|(&(x, y), &l)| l && (x == id || y == id));
+                    prop_assert_eq!(set.has_live(id), live);
                     let mut partners: Vec<(u32, bool)> =
                         set.partners(id).iter().map(|e| (e.other, e.live())).collect();
                     partners.sort();
