@@ -10,7 +10,7 @@ use rapier3d::prelude::*;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct FilterData {
     /// The parent body's handle as (index, generation), or [`NO_PARENT`]: two `u32`, where an
-    /// `Option<RigidBodyHandle>` took 12 bytes and made a proxy 68 (see `proxy.rs`).
+    /// `Option<RigidBodyHandle>` takes 12 bytes (the proxy record's size matters: `proxy.rs`).
     parent: [u32; 2],
     pub body_type: RigidBodyType,
     pub groups: InteractionGroups,
