@@ -241,6 +241,11 @@ impl ProxyTree {
             .filter(|&m| m != DEAD)
             .collect();
         members.append(&mut self.pending);
+        // Every member has a record (a proxy leaves its tree before its record goes); one that
+        // did not would be left out of the new tree rather than stop the update.
+        let before = members.len();
+        members.retain(|&id| proxies.get(id as usize).is_some_and(Option::is_some));
+        debug_assert_eq!(members.len(), before, "tree members without a proxy record");
         self.pending_fresh = false;
         let mut boxes = Vec::with_capacity(members.len());
         self.changes.clear();
@@ -248,11 +253,10 @@ impl ProxyTree {
         self.summary = TreeFilterSummary::default();
         for (slot, &id) in members.iter().enumerate() {
             places[id as usize].loc = Loc::Tree(slot as u32);
-            let p = proxies[id as usize]
-                .as_ref()
-                .expect("tree member has a proxy");
-            boxes.push(p.fat);
-            self.summary.add(&p.filter);
+            if let Some(p) = &proxies[id as usize] {
+                boxes.push(p.fat);
+                self.summary.add(&p.filter);
+            }
         }
         // Fat boxes are checked before they enter a tree, so the build cannot fail; an empty
         // tree (and every member pending again) would be the safe fallback.
