@@ -55,13 +55,20 @@ impl Splat {
     /// lane's inverted box overlaps nothing).
     #[inline(always)]
     fn hits(&self, n: &Node4) -> u32 {
-        let mut m = F4::load4(&n.b[0])
+        self.hits_faces(&n.b)
+    }
+
+    /// [`Splat::hits`] on four boxes laid out by face as a [`Node4`]'s are (`b[a]`: the lower
+    /// coordinates along axis `a`, `b[3 + a]` the upper ones).
+    #[inline(always)]
+    fn hits_faces(&self, b: &[[f32; 4]; 6]) -> u32 {
+        let mut m = F4::load4(&b[0])
             .le(self.hi[0])
-            .and(self.lo[0].le(F4::load4(&n.b[3])));
+            .and(self.lo[0].le(F4::load4(&b[3])));
         for a in 1..3 {
             m = m
-                .and(F4::load4(&n.b[a]).le(self.hi[a]))
-                .and(self.lo[a].le(F4::load4(&n.b[3 + a])));
+                .and(F4::load4(&b[a]).le(self.hi[a]))
+                .and(self.lo[a].le(F4::load4(&b[3 + a])));
         }
         m.bits()
     }
@@ -431,16 +438,10 @@ impl<'a, F: FnMut(u32, u32), M: LaneMarks> Walk<'a, F, M> {
         let t = self.t;
         let prims = &t.prim_bounds[first..first + count];
         let groups = count.div_ceil(4);
-        // Group `g`, face `f` (min x, y, z, max x, y, z), lane `l`: primitive `4 g + l`. The
-        // lanes past `count` hold an inverted box, which overlaps nothing.
-        let mut faces = [[[0.0f32; 4]; 6]; FILTERED_LEAF / 4];
-        let last = &mut faces[groups - 1];
-        for f in &mut last[..3] {
-            *f = [f32::INFINITY; 4];
-        }
-        for f in &mut last[3..] {
-            *f = [f32::NEG_INFINITY; 4];
-        }
+        // Group `g`, face `f` (min x, y, z, max x, y, z), lane `l`: primitive `4 g + l`, laid
+        // out as a `Node4`'s boxes. The lanes past `count` keep an empty node's inverted box,
+        // which overlaps nothing.
+        let mut faces = [Node4::EMPTY.b; FILTERED_LEAF / 4];
         let mut marked = 0u32;
         for (k, p) in prims.iter().enumerate() {
             let g = &mut faces[k / 4];
@@ -454,15 +455,7 @@ impl<'a, F: FnMut(u32, u32), M: LaneMarks> Walk<'a, F, M> {
             let p = Splat::prim(prim);
             let mut hits = 0u32;
             for (g, group) in faces.iter().enumerate().take(groups).skip((s + 1) / 4) {
-                let mut m = F4::load4(&group[0])
-                    .le(p.hi[0])
-                    .and(p.lo[0].le(F4::load4(&group[3])));
-                for a in 1..3 {
-                    m = m
-                        .and(F4::load4(&group[a]).le(p.hi[a]))
-                        .and(p.lo[a].le(F4::load4(&group[3 + a])));
-                }
-                hits |= m.bits() << (4 * g);
+                hits |= p.hits_faces(group) << (4 * g);
             }
             // The primitives after `s`, with a marked side.
             hits &= !((2u32 << s) - 1);
@@ -478,7 +471,8 @@ impl<'a, F: FnMut(u32, u32), M: LaneMarks> Walk<'a, F, M> {
         }
     }
 
-    /// [`Walk::leaf_self`] pair by pair, for leaves of more than `FILTERED_LEAF` primitives.
+    /// [`Walk::leaf_self`] pair by pair, for leaves of up to four primitives or more than
+    /// `FILTERED_LEAF`.
     fn leaf_self_pairwise(&mut self, first: usize, count: usize) {
         let t = self.t;
         for s in first..first + count {
@@ -876,23 +870,34 @@ mod tests {
                         < density
                 });
                 let view = pm.lane_view();
-                let (mut grouped, mut pairwise) = (Vec::new(), Vec::new());
-                for (out, by_groups) in [(&mut grouped, true), (&mut pairwise, false)] {
-                    let mut push = |a: u32, b: u32| out.push((a, b));
-                    if density == 4 {
-                        let mut w = super::Walk::new(&t, &super::AllMarked, false, &mut push);
-                        for &(first, count) in &leaves {
-                            w.leaf_self_either(first, count, by_groups);
-                        }
-                        w.flush();
-                    } else {
-                        let mut w = super::Walk::new(&t, &view, false, &mut push);
-                        for &(first, count) in &leaves {
-                            w.leaf_self_either(first, count, by_groups);
-                        }
-                        w.flush();
+                // Every leaf's own pairs, by groups or pair by pair, with marks `marks`.
+                fn leaf_pairs<M: super::LaneMarks>(
+                    t: &Bvh,
+                    marks: &M,
+                    leaves: &[(usize, usize)],
+                    by_groups: bool,
+                ) -> Vec<(u32, u32)> {
+                    let mut out = Vec::new();
+                    let mut w = super::Walk::new(t, marks, false, |a, b| out.push((a, b)));
+                    for &(first, count) in leaves {
+                        w.leaf_self_either(first, count, by_groups);
                     }
+                    w.flush();
+                    drop(w);
+                    out
                 }
+                let (grouped, pairwise) = if density == 4 {
+                    let all = &super::AllMarked;
+                    (
+                        leaf_pairs(&t, all, &leaves, true),
+                        leaf_pairs(&t, all, &leaves, false),
+                    )
+                } else {
+                    (
+                        leaf_pairs(&t, &view, &leaves, true),
+                        leaf_pairs(&t, &view, &leaves, false),
+                    )
+                };
                 // Nothing is marked at density 0.
                 assert_eq!(
                     pairwise.is_empty(),

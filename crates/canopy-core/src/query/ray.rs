@@ -279,7 +279,7 @@ pub(crate) struct Node4 {
 const _: () = assert!(std::mem::size_of::<Node4>() == 128);
 
 impl Node4 {
-    const EMPTY: Node4 = Node4 {
+    pub(crate) const EMPTY: Node4 = Node4 {
         b: [
             [f32::INFINITY; 4],
             [f32::INFINITY; 4],
