@@ -2094,15 +2094,7 @@ mod tests {
 
         // A row of fixed balls, each overlapping its neighbours (fixed-fixed pairs are
         // filtered out); some become dynamic and must pair with their neighbours.
-        let mut bodies = RigidBodySet::new();
-        let mut colliders = ColliderSet::new();
-        let mut handles = Vec::new();
-        for i in 0..100 {
-            let b =
-                bodies.insert(RigidBodyBuilder::fixed().translation(vector![i as f32, 0.0, 0.0]));
-            colliders.insert_with_parent(ColliderBuilder::ball(0.6), b, &mut bodies);
-            handles.push(b);
-        }
+        let (bodies, colliders, handles) = ball_row(100, RigidBodyType::Fixed);
         let all: Vec<ColliderHandle> = colliders.iter().map(|(h, _)| h).collect();
         let params = IntegrationParameters::default();
         for delay in [false, true] {
@@ -2135,6 +2127,26 @@ mod tests {
                 assert_eq!(pairs, expected, "delay {delay}, body {i}");
             }
         }
+    }
+
+    /// A row of `n` balls of radius 0.6 one unit apart along x (each overlapping its two
+    /// neighbours), each on a body of type `body_type`: the sets and the bodies in row order.
+    fn ball_row(
+        n: usize,
+        body_type: RigidBodyType,
+    ) -> (RigidBodySet, ColliderSet, Vec<RigidBodyHandle>) {
+        let mut bodies = RigidBodySet::new();
+        let mut colliders = ColliderSet::new();
+        let handles = (0..n)
+            .map(|i| {
+                let body =
+                    RigidBodyBuilder::new(body_type).translation(vector![i as f32, 0.0, 0.0]);
+                let b = bodies.insert(body);
+                colliders.insert_with_parent(ColliderBuilder::ball(0.6), b, &mut bodies);
+                b
+            })
+            .collect();
+        (bodies, colliders, handles)
     }
 
     /// The first disagreement between the proxy records and their places (`proxy.rs`): a
@@ -2194,15 +2206,7 @@ mod tests {
             assert_eq!(places_disagree(&bp), None, "spawn_storm update {k}");
         }
 
-        let mut bodies = RigidBodySet::new();
-        let mut colliders = ColliderSet::new();
-        let mut handles = Vec::new();
-        for i in 0..40 {
-            let b =
-                bodies.insert(RigidBodyBuilder::dynamic().translation(vector![i as f32, 0.0, 0.0]));
-            colliders.insert_with_parent(ColliderBuilder::ball(0.6), b, &mut bodies);
-            handles.push(b);
-        }
+        let (mut bodies, mut colliders, handles) = ball_row(40, RigidBodyType::Dynamic);
         let params = IntegrationParameters::default();
         let mut bp = CanopyBroadPhase::new();
         let update = |bp: &mut CanopyBroadPhase,
