@@ -156,18 +156,8 @@ mod tests {
 
     #[test]
     fn the_layout_of_rapiers_sets_is_learned() {
-        let mut bodies = RigidBodySet::new();
-        let mut colliders = ColliderSet::new();
-        let mut handles = Vec::new();
-        for i in 0..20 {
-            let b =
-                bodies.insert(RigidBodyBuilder::dynamic().translation(vector![i as f32, 0.0, 0.0]));
-            handles.push(colliders.insert_with_parent(
-                ColliderBuilder::ball(0.5).build(),
-                b,
-                &mut bodies,
-            ));
-        }
+        let (bodies, colliders, row) = crate::broad_phase::ball_row(20, RigidBodyType::Dynamic);
+        let handles: Vec<ColliderHandle> = row.iter().map(|&b| bodies[b].colliders()[0]).collect();
         let ahead = ExamineAhead::learn(&colliders, &bodies, 0..20u32, |i| handles[i as usize])
             .expect("learned");
         for &h in &handles {

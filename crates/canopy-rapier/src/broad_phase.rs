@@ -1941,6 +1941,27 @@ impl BroadPhase for CanopyBroadPhase {
     }
 }
 
+/// For tests (here and in `arena_ahead.rs`): a row of `n` balls of radius 0.6 one unit apart
+/// along x (each overlapping its two neighbours), each on a body of type `body_type`: the sets
+/// and the bodies in row order.
+#[cfg(test)]
+pub(crate) fn ball_row(
+    n: usize,
+    body_type: RigidBodyType,
+) -> (RigidBodySet, ColliderSet, Vec<RigidBodyHandle>) {
+    let mut bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let handles = (0..n)
+        .map(|i| {
+            let body = RigidBodyBuilder::new(body_type).translation(vector![i as f32, 0.0, 0.0]);
+            let b = bodies.insert(body);
+            colliders.insert_with_parent(ColliderBuilder::ball(0.6), b, &mut bodies);
+            b
+        })
+        .collect();
+    (bodies, colliders, handles)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -2127,26 +2148,6 @@ mod tests {
                 assert_eq!(pairs, expected, "delay {delay}, body {i}");
             }
         }
-    }
-
-    /// A row of `n` balls of radius 0.6 one unit apart along x (each overlapping its two
-    /// neighbours), each on a body of type `body_type`: the sets and the bodies in row order.
-    fn ball_row(
-        n: usize,
-        body_type: RigidBodyType,
-    ) -> (RigidBodySet, ColliderSet, Vec<RigidBodyHandle>) {
-        let mut bodies = RigidBodySet::new();
-        let mut colliders = ColliderSet::new();
-        let handles = (0..n)
-            .map(|i| {
-                let body =
-                    RigidBodyBuilder::new(body_type).translation(vector![i as f32, 0.0, 0.0]);
-                let b = bodies.insert(body);
-                colliders.insert_with_parent(ColliderBuilder::ball(0.6), b, &mut bodies);
-                b
-            })
-            .collect();
-        (bodies, colliders, handles)
     }
 
     /// The first disagreement between the proxy records and their places (`proxy.rs`): a
