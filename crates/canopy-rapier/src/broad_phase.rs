@@ -1190,7 +1190,9 @@ impl CanopyBroadPhase {
                     fat: if valid { fat } else { Aabb::EMPTY },
                     filter,
                 };
-                // A proxy removed earlier in this update may have left its flags here.
+                // A proxy removed earlier in this update may have left its flags here: its
+                // `box_only` is not this one's; its `moved` stays, as the id is in the move
+                // buffer already (which holds each id once).
                 self.places[id as usize].box_only = false;
                 if valid {
                     self.places[id as usize].loc =
