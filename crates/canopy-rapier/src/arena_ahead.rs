@@ -137,13 +137,22 @@ impl ExamineAhead {
         if let (Some(bodies), Some(Some(p))) = (self.bodies, proxies.get(index + BODY_AHEAD)) {
             if let Some(j) = p.filter.parent_index() {
                 let b = bodies.address(j as usize);
-                let size = std::mem::size_of::<RigidBody>();
                 prefetch_line(b);
-                prefetch_line(b.wrapping_add(size - 1));
-                prefetch_line(b.wrapping_add(size));
+                prefetch_line(body_last_byte(b));
+                prefetch_line(body_last_byte(b).wrapping_add(1));
             }
         }
     }
+}
+
+/// The address of the last byte of the body at `body`: Rapier's `RigidBody` keeps its one-byte
+/// fields (body type, dominance, enabled) in its last 16 bytes, on another line than the fields
+/// the collision box reads, and its arena puts the entry's generation right after it. Only ever
+/// a prefetch hint: where that layout differs, the fields are read as before, only without the
+/// head start.
+#[inline(always)]
+pub(crate) fn body_last_byte(body: usize) -> usize {
+    body.wrapping_add(std::mem::size_of::<RigidBody>() - 1)
 }
 
 /// Starts loading the one cache line holding `address`. Only a hint: a prefetch never faults

@@ -27,7 +27,7 @@
 //! 6. Liveness: every collider Rapier reported checks its candidates that are not live yet;
 //!    those whose exact boxes now overlap become live (`AddPair`).
 
-use crate::arena_ahead::ExamineAhead;
+use crate::arena_ahead::{body_last_byte, ExamineAhead};
 use crate::box_lanes::BoxLanes;
 use crate::config::{CanopyBroadPhaseConfig, ConfigError};
 use crate::filter::{FilterData, Mobility};
@@ -96,14 +96,6 @@ const REFATTEN_WORDS: usize = 4;
 fn clamped_to_finite(b: &Aabb) -> Aabb {
     let clamp = |p: Point<f32>| p.map(|x| x.clamp(-f32::MAX, f32::MAX));
     Aabb::new(clamp(b.min), clamp(b.max))
-}
-
-/// The address of the last byte of `rb`: Rapier's `RigidBody` keeps its one-byte fields (body
-/// type, dominance, enabled) at its end, on another line than the fields the collision box
-/// reads. Only a prefetch hint: where that layout differs, the body type is read as before,
-/// only without the head start.
-fn body_tail_address(rb: &RigidBody) -> usize {
-    (rb as *const RigidBody as usize) + std::mem::size_of::<RigidBody>() - 1
 }
 
 /// The fast path compares the parent's body type with the one the proxy was filed under, with
@@ -1029,7 +1021,7 @@ impl CanopyBroadPhase {
                     if !DELAY {
                         retyped |= rb.body_type() != filed;
                     } else {
-                        prefetch_l2(body_tail_address(rb));
+                        prefetch_l2(body_last_byte(rb as *const RigidBody as usize));
                         if let Some((due, filed)) = delayed[delay_at].replace((rb, filed)) {
                             retyped |= due.body_type() != filed;
                         }
