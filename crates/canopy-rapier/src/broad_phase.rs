@@ -112,20 +112,12 @@ const BODY_TYPE_DELAY: usize = 16;
 /// late (`BODY_TYPE_DELAY`).
 const DELAYED_BODY_BYTES: usize = 16 << 20;
 
-/// Starts loading the cache line at `address` into the second-level cache. Only a hint: a
-/// prefetch never faults and changes no memory, whatever the address. (Into the first level
-/// as well, body lines evicted what the examine loop was reading: `many_kinematics` about 13%
-/// slower, with the chunked checks this replaced.)
+/// Starts loading the cache line at `address` into the second-level cache, not the first
+/// (`prefetch_into`). (Into the first level as well, body lines evicted what the examine loop
+/// was reading: `many_kinematics` about 13% slower, with the chunked checks this replaced.)
 #[inline(always)]
 fn prefetch_l2(address: usize) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is only a hint; SSE is part of the x86-64 baseline.
-    unsafe {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T1};
-        _mm_prefetch::<_MM_HINT_T1>(address as *const i8);
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = address;
+    prefetch_into::<false>(address);
 }
 
 /// The examine loop asks for the colliders and bodies ahead (`ExamineAhead`) when at least one
@@ -333,20 +325,38 @@ macro_rules! lap {
 /// over nearly every proxy, in index order, need none: the hardware streams them.)
 const PREFETCH_AHEAD: usize = 4;
 
-/// Starts loading the cache lines holding the 64 bytes from `p` (one or two lines: a proxy
-/// record straddles two). Only a hint: a prefetch never faults and never changes memory,
-/// whatever the address.
+/// Starts loading the one cache line holding `address`, into every cache level when `L1`,
+/// else from the second level out. Only a hint: a prefetch never faults and never changes
+/// memory, whatever the address.
 #[inline(always)]
-pub(crate) fn prefetch<T>(p: *const T) {
+fn prefetch_into<const L1: bool>(address: usize) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: see above; SSE is part of the x86-64 baseline.
     unsafe {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        _mm_prefetch::<_MM_HINT_T0>(p.cast());
-        _mm_prefetch::<_MM_HINT_T0>(p.cast::<i8>().wrapping_add(63));
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0, _MM_HINT_T1};
+        let p = address as *const i8;
+        if L1 {
+            _mm_prefetch::<_MM_HINT_T0>(p);
+        } else {
+            _mm_prefetch::<_MM_HINT_T1>(p);
+        }
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
+    let _ = address;
+}
+
+/// Starts loading the one cache line holding `address`, into every cache level.
+#[inline(always)]
+pub(crate) fn prefetch_line(address: usize) {
+    prefetch_into::<true>(address);
+}
+
+/// Starts loading the cache lines holding the 64 bytes from `p` (one or two lines: a proxy
+/// record straddles two), into every cache level.
+#[inline(always)]
+pub(crate) fn prefetch<T>(p: *const T) {
+    prefetch_line(p as usize);
+    prefetch_line((p as usize).wrapping_add(63));
 }
 
 /// With fewer moved proxies than one tree member in this many, new pairs are found by one
